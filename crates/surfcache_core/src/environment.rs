@@ -1,0 +1,184 @@
+//! Environment lighting: radiance arriving from infinitely far away, by direction.
+//!
+//! Maps are equirectangular with +Y up (CONTRACT.md): pixel (i, j) of a W×H image, row 0
+//! at the top, covers u = (i+½)/W, v = (j+½)/H and looks along
+//! θ = vπ, φ = (u−½)2π, d = (sin θ sin φ, cos θ, −sin θ cos φ).
+
+use core::f32::consts::{PI, TAU};
+use glam::{Vec2, Vec3};
+use std::sync::Arc;
+
+/// An equirectangular radiance map in linear RGB, W/(m²·sr).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnvironmentMap {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major texels, row 0 = zenith.
+    pub texels: Vec<Vec3>,
+}
+
+/// Direction of image coordinates (u, v) ∈ [0,1]² (CONTRACT.md equirectangular convention).
+#[inline]
+pub fn uv_to_direction(uv: Vec2) -> Vec3 {
+    let theta = uv.y * PI;
+    let phi = (uv.x - 0.5) * TAU;
+    let (st, ct) = theta.sin_cos();
+    let (sp, cp) = phi.sin_cos();
+    Vec3::new(st * sp, ct, -st * cp)
+}
+
+/// Image coordinates (u, v) ∈ [0,1]² of a unit direction; the inverse of [`uv_to_direction`].
+#[inline]
+pub fn direction_to_uv(d: Vec3) -> Vec2 {
+    let theta = d.y.clamp(-1.0, 1.0).acos();
+    let phi = d.x.atan2(-d.z);
+    Vec2::new(phi / TAU + 0.5, theta / PI)
+}
+
+impl EnvironmentMap {
+    /// A map filled with one radiance.
+    pub fn constant(width: u32, height: u32, radiance: Vec3) -> Self {
+        Self {
+            width,
+            height,
+            texels: vec![radiance; (width * height) as usize],
+        }
+    }
+
+    /// Builds a map by evaluating `f` at every pixel's centre direction.
+    pub fn from_fn(width: u32, height: u32, f: impl Fn(Vec3) -> Vec3) -> Self {
+        let mut texels = Vec::with_capacity((width * height) as usize);
+        for j in 0..height {
+            for i in 0..width {
+                let uv = Vec2::new(
+                    (i as f32 + 0.5) / width as f32,
+                    (j as f32 + 0.5) / height as f32,
+                );
+                texels.push(f(uv_to_direction(uv)));
+            }
+        }
+        Self {
+            width,
+            height,
+            texels,
+        }
+    }
+
+    #[inline]
+    pub fn texel(&self, i: u32, j: u32) -> Vec3 {
+        self.texels[(j * self.width + i) as usize]
+    }
+
+    /// Bilinear lookup in direction `d` (unit), wrapping horizontally and clamping at the poles.
+    pub fn radiance(&self, d: Vec3) -> Vec3 {
+        let uv = direction_to_uv(d);
+        let x = uv.x * self.width as f32 - 0.5;
+        let y = (uv.y * self.height as f32 - 0.5).clamp(0.0, (self.height - 1) as f32);
+        let x0 = x.floor();
+        let y0 = y.floor();
+        let fx = x - x0;
+        let fy = y - y0;
+        let w = self.width as i64;
+        let i0 = (x0 as i64).rem_euclid(w) as u32;
+        let i1 = (x0 as i64 + 1).rem_euclid(w) as u32;
+        let j0 = y0 as u32;
+        let j1 = (j0 + 1).min(self.height - 1);
+        let top = self.texel(i0, j0) * (1.0 - fx) + self.texel(i1, j0) * fx;
+        let bottom = self.texel(i0, j1) * (1.0 - fx) + self.texel(i1, j1) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+
+    /// Solid angle of pixel row `j`: (2π/W)·(cos θ₀ − cos θ₁).
+    pub fn row_solid_angle(&self, j: u32) -> f32 {
+        let t0 = j as f32 / self.height as f32 * PI;
+        let t1 = (j + 1) as f32 / self.height as f32 * PI;
+        TAU / self.width as f32 * (t0.cos() - t1.cos())
+    }
+}
+
+/// What the sky contributes: a uniform radiance or a map, times an intensity.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Environment {
+    /// Uniform radiance, used where there is no map.
+    pub color: Vec3,
+    pub map: Option<Arc<EnvironmentMap>>,
+    /// Scale applied to `color` or `map`.
+    pub intensity: f32,
+}
+
+impl Default for Environment {
+    fn default() -> Self {
+        Self::black()
+    }
+}
+
+impl Environment {
+    /// No light from the environment.
+    pub fn black() -> Self {
+        Self {
+            color: Vec3::ZERO,
+            map: None,
+            intensity: 1.0,
+        }
+    }
+
+    /// A uniform sky of radiance `color`.
+    pub fn uniform(color: Vec3) -> Self {
+        Self {
+            color,
+            map: None,
+            intensity: 1.0,
+        }
+    }
+
+    /// A map-based sky.
+    pub fn from_map(map: Arc<EnvironmentMap>) -> Self {
+        Self {
+            color: Vec3::ZERO,
+            map: Some(map),
+            intensity: 1.0,
+        }
+    }
+
+    /// Radiance arriving from direction `d` (unit, pointing away from the scene).
+    #[inline]
+    pub fn radiance(&self, d: Vec3) -> Vec3 {
+        match &self.map {
+            Some(map) => map.radiance(d) * self.intensity,
+            None => self.color * self.intensity,
+        }
+    }
+
+    /// True when the environment delivers no light at all.
+    pub fn is_black(&self) -> bool {
+        self.intensity == 0.0
+            || match &self.map {
+                Some(map) => map.texels.iter().all(|t| *t == Vec3::ZERO),
+                None => self.color == Vec3::ZERO,
+            }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn convention_matches_contract() {
+        // Image centre looks along −Z, a quarter turn right is +X, the top is +Y.
+        assert!((uv_to_direction(Vec2::new(0.5, 0.5)) - Vec3::NEG_Z).length() < 1e-6);
+        assert!((uv_to_direction(Vec2::new(0.75, 0.5)) - Vec3::X).length() < 1e-6);
+        assert!((uv_to_direction(Vec2::new(0.3, 0.0)) - Vec3::Y).length() < 1e-6);
+        for d in [Vec3::new(0.3, 0.4, -0.5), Vec3::new(-0.7, -0.1, 0.2)] {
+            let d = d.normalize();
+            assert!((uv_to_direction(direction_to_uv(d)) - d).length() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn row_solid_angles_sum_to_sphere() {
+        let map = EnvironmentMap::constant(16, 8, Vec3::ONE);
+        let total: f32 = (0..8).map(|j| map.row_solid_angle(j) * 16.0).sum();
+        assert!((total - 4.0 * PI).abs() < 1e-4);
+    }
+}

@@ -1,0 +1,419 @@
+//! Scene data: primitives p = (Δ, ν, m) grouped into meshes, materials, lights, environment.
+//!
+//! A [`Mesh`] is one glTF primitive: indexed triangles with one material, vertex normals
+//! (the normal function ν of DESIGN.md §1) and optional UV sets. An [`Instance`] places a
+//! mesh in the world with a material. Lights are stored in world space.
+
+use crate::{environment::Environment, geometry};
+use glam::{Affine3A, Vec2, Vec3, Vec4};
+use std::sync::Arc;
+
+/// Errors in scene data, each naming where it is.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SceneError {
+    #[error("mesh '{mesh}': vertex {vertex} has a non-finite position {position:?}")]
+    NonFinitePosition {
+        mesh: String,
+        vertex: usize,
+        position: [f32; 3],
+    },
+    #[error("mesh '{mesh}': vertex {vertex} has a non-finite normal")]
+    NonFiniteNormal { mesh: String, vertex: usize },
+    #[error(
+        "mesh '{mesh}': triangle {triangle} uses vertex {index} but the mesh has {vertex_count} vertices"
+    )]
+    IndexOutOfRange {
+        mesh: String,
+        triangle: usize,
+        index: u32,
+        vertex_count: usize,
+    },
+    #[error("mesh '{mesh}': {attribute} has {found} entries for {vertex_count} vertices")]
+    AttributeLength {
+        mesh: String,
+        attribute: &'static str,
+        found: usize,
+        vertex_count: usize,
+    },
+    #[error("instance '{instance}': transform is not finite or not invertible")]
+    BadTransform { instance: String },
+    #[error("the scene has no triangles")]
+    Empty,
+}
+
+/// Indexed triangles of one material with vertex normals and optional UV sets.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Mesh {
+    pub name: String,
+    pub positions: Vec<Vec3>,
+    /// Per-vertex shading normals μ_X (unit). Computed from the triangles when a file has none.
+    pub normals: Vec<Vec3>,
+    /// TEXCOORD_0 (material textures); empty when absent.
+    pub uv0: Vec<Vec2>,
+    /// TEXCOORD_1 (lightmap layout); empty when absent.
+    pub uv1: Vec<Vec2>,
+    pub indices: Vec<[u32; 3]>,
+}
+
+impl Mesh {
+    /// A mesh with flat (geometric) normals: vertices are not shared between triangles
+    /// that are not coplanar, so the area-weighted normals equal each face normal.
+    pub fn new(name: impl Into<String>, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> Self {
+        let mut mesh = Mesh {
+            name: name.into(),
+            positions,
+            normals: Vec::new(),
+            uv0: Vec::new(),
+            uv1: Vec::new(),
+            indices,
+        };
+        mesh.compute_normals();
+        mesh
+    }
+
+    /// Area-weighted vertex normals: μ_X ∝ Σ over adjacent triangles of (B−A)×(C−A).
+    pub fn compute_normals(&mut self) {
+        let mut normals = vec![Vec3::ZERO; self.positions.len()];
+        for tri in &self.indices {
+            let [a, b, c] = tri.map(|i| self.positions[i as usize]);
+            let n = geometry::triangle_cross(a, b, c);
+            for &i in tri {
+                normals[i as usize] += n;
+            }
+        }
+        for n in &mut normals {
+            *n = n.normalize_or(Vec3::Y);
+        }
+        self.normals = normals;
+    }
+
+    /// Checks that every position and normal is finite, every index is in range and every
+    /// attribute has one entry per vertex.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        let n = self.positions.len();
+        for (vertex, p) in self.positions.iter().enumerate() {
+            if !p.is_finite() {
+                return Err(SceneError::NonFinitePosition {
+                    mesh: self.name.clone(),
+                    vertex,
+                    position: p.to_array(),
+                });
+            }
+        }
+        for (attribute, found) in [
+            ("NORMAL", self.normals.len()),
+            (
+                "TEXCOORD_0",
+                if self.uv0.is_empty() {
+                    n
+                } else {
+                    self.uv0.len()
+                },
+            ),
+            (
+                "TEXCOORD_1",
+                if self.uv1.is_empty() {
+                    n
+                } else {
+                    self.uv1.len()
+                },
+            ),
+        ] {
+            if found != n {
+                return Err(SceneError::AttributeLength {
+                    mesh: self.name.clone(),
+                    attribute,
+                    found,
+                    vertex_count: n,
+                });
+            }
+        }
+        if let Some(vertex) = self.normals.iter().position(|v| !v.is_finite()) {
+            return Err(SceneError::NonFiniteNormal {
+                mesh: self.name.clone(),
+                vertex,
+            });
+        }
+        for (triangle, tri) in self.indices.iter().enumerate() {
+            if let Some(&index) = tri.iter().find(|&&i| i as usize >= n) {
+                return Err(SceneError::IndexOutOfRange {
+                    mesh: self.name.clone(),
+                    triangle,
+                    index,
+                    vertex_count: n,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Removes zero-area and degenerate triangles (area below 1e-7 of the squared longest
+    /// edge, or with a repeated index) and returns how many were dropped.
+    pub fn drop_degenerate(&mut self) -> usize {
+        let before = self.indices.len();
+        let positions = &self.positions;
+        self.indices.retain(|tri| {
+            if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+                return false;
+            }
+            let [a, b, c] = tri.map(|i| positions[i as usize]);
+            let longest = (b - a)
+                .length_squared()
+                .max((c - b).length_squared())
+                .max((a - c).length_squared());
+            let cross = geometry::triangle_cross(a, b, c).length();
+            cross.is_finite() && cross > 2e-7 * longest && longest > 0.0
+        });
+        before - self.indices.len()
+    }
+
+    /// Corner positions of triangle `t`.
+    #[inline]
+    pub fn triangle(&self, t: usize) -> [Vec3; 3] {
+        self.indices[t].map(|i| self.positions[i as usize])
+    }
+}
+
+/// A linear-RGBA texture (sRGB images are decoded to linear on load).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Texture {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major, row 0 at the top (glTF UV (0,0) is the image's top-left).
+    pub texels: Vec<Vec4>,
+}
+
+impl Texture {
+    /// Bilinear lookup with repeat wrapping, glTF's default sampler.
+    pub fn sample(&self, uv: Vec2) -> Vec4 {
+        let x = uv.x * self.width as f32 - 0.5;
+        let y = uv.y * self.height as f32 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (w, h) = (self.width as i64, self.height as i64);
+        // Non-finite UVs saturate to i64::MIN/MAX under `as`; rem_euclid keeps them in range.
+        let i0 = (x0 as i64).rem_euclid(w) as usize;
+        let i1 = (x0 as i64).wrapping_add(1).rem_euclid(w) as usize;
+        let j0 = (y0 as i64).rem_euclid(h) as usize;
+        let j1 = (y0 as i64).wrapping_add(1).rem_euclid(h) as usize;
+        let wu = self.width as usize;
+        let t = |i: usize, j: usize| self.texels[j * wu + i];
+        let top = t(i0, j0) * (1.0 - fx) + t(i1, j0) * fx;
+        let bottom = t(i0, j1) * (1.0 - fx) + t(i1, j1) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+}
+
+/// How a material's alpha is used.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AlphaMode {
+    Opaque,
+    /// Opaque where base-colour alpha ≥ the cutoff, absent elsewhere (tested at every hit).
+    Mask(f32),
+    /// Treated as opaque: a diffuse baker has no notion of partial coverage.
+    Blend,
+}
+
+/// A two-sided Lambertian reflector with optional front-face (or two-sided) emission.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    pub name: String,
+    /// Diffuse albedo ρ = baseColorFactor.rgb × (1 − metallic) (CONTRACT.md).
+    pub albedo: Vec3,
+    /// baseColorFactor.a
+    pub alpha: f32,
+    /// baseColorTexture (linear RGBA), multiplied into albedo and alpha, read with TEXCOORD_0.
+    pub albedo_texture: Option<Arc<Texture>>,
+    /// Emitted radiance L_e in W/(m²·sr) = emissiveFactor × emissive strength.
+    pub emission: Vec3,
+    /// emissiveTexture (linear RGB), multiplied into `emission`.
+    pub emission_texture: Option<Arc<Texture>>,
+    /// Emission leaves both faces; reflection is two-sided regardless.
+    pub double_sided: bool,
+    pub alpha_mode: AlphaMode,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Self::diffuse("default", Vec3::splat(0.8))
+    }
+}
+
+impl Material {
+    /// A plain diffuse material.
+    pub fn diffuse(name: impl Into<String>, albedo: Vec3) -> Self {
+        Self {
+            name: name.into(),
+            albedo,
+            alpha: 1.0,
+            albedo_texture: None,
+            emission: Vec3::ZERO,
+            emission_texture: None,
+            double_sided: false,
+            alpha_mode: AlphaMode::Opaque,
+        }
+    }
+
+    /// A diffuse material that also emits `emission` from its front face.
+    pub fn emissive(name: impl Into<String>, albedo: Vec3, emission: Vec3) -> Self {
+        Self {
+            emission,
+            ..Self::diffuse(name, albedo)
+        }
+    }
+
+    /// Albedo at texture coordinate `uv0` (uv0 is ignored without a texture).
+    #[inline]
+    pub fn albedo_at(&self, uv0: Vec2) -> Vec3 {
+        match &self.albedo_texture {
+            Some(t) => self.albedo * t.sample(uv0).truncate(),
+            None => self.albedo,
+        }
+    }
+
+    /// Emitted radiance at `uv0` leaving the given face.
+    #[inline]
+    pub fn emission_at(&self, uv0: Vec2, front_face: bool) -> Vec3 {
+        if !(front_face || self.double_sided) || self.emission == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        match &self.emission_texture {
+            Some(t) => self.emission * t.sample(uv0).truncate(),
+            None => self.emission,
+        }
+    }
+
+    /// Whether the surface is present at `uv0` (alpha mask test).
+    #[inline]
+    pub fn is_opaque_at(&self, uv0: Vec2) -> bool {
+        match self.alpha_mode {
+            AlphaMode::Mask(cutoff) => {
+                let a = match &self.albedo_texture {
+                    Some(t) => self.alpha * t.sample(uv0).w,
+                    None => self.alpha,
+                };
+                a >= cutoff
+            }
+            _ => true,
+        }
+    }
+
+    pub fn is_emissive(&self) -> bool {
+        self.emission.max_element() > 0.0
+    }
+}
+
+/// A punctual light (KHR_lights_punctual), in world space, radiometric units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Light {
+    /// Delivers `irradiance` W/m² to a surface facing it head-on, travelling along `direction`.
+    Directional { direction: Vec3, irradiance: Vec3 },
+    /// Radiant intensity `intensity` W/sr in every direction.
+    Point { position: Vec3, intensity: Vec3 },
+    /// Radiant intensity `intensity` W/sr on the axis `direction`, with glTF's smooth cone falloff.
+    Spot {
+        position: Vec3,
+        direction: Vec3,
+        intensity: Vec3,
+        inner_cone_angle: f32,
+        outer_cone_angle: f32,
+    },
+}
+
+impl Light {
+    /// glTF spot attenuation: clamp((cos α − cos outer)/(cos inner − cos outer), 0, 1)².
+    pub fn spot_falloff(direction: Vec3, to_point: Vec3, inner: f32, outer: f32) -> f32 {
+        let cos_outer = outer.cos();
+        let scale = 1.0 / (inner.cos() - cos_outer).max(1e-3);
+        let t = ((direction.dot(to_point) - cos_outer) * scale).clamp(0.0, 1.0);
+        t * t
+    }
+}
+
+/// A mesh placed in the world with a material.
+#[derive(Clone, Debug)]
+pub struct Instance {
+    pub name: String,
+    pub mesh: Arc<Mesh>,
+    pub material: Arc<Material>,
+    /// Object to world.
+    pub transform: Affine3A,
+}
+
+/// Everything that is traced: instances, punctual lights and the environment.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    pub name: String,
+    pub instances: Vec<Instance>,
+    pub lights: Vec<Light>,
+    pub environment: Environment,
+}
+
+impl Scene {
+    /// Total triangle count over all instances.
+    pub fn triangle_count(&self) -> usize {
+        self.instances.iter().map(|i| i.mesh.indices.len()).sum()
+    }
+
+    /// World-space bounding box (min, max) of all instances.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for inst in &self.instances {
+            for p in &inst.mesh.positions {
+                let w = inst.transform.transform_point3(*p);
+                lo = lo.min(w);
+                hi = hi.max(w);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Validates every mesh and transform.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        for inst in &self.instances {
+            inst.mesh.validate()?;
+            if !inst.transform.is_finite() || inst.transform.matrix3.determinant().abs() < 1e-30 {
+                return Err(SceneError::BadTransform {
+                    instance: inst.name.clone(),
+                });
+            }
+        }
+        if self.triangle_count() == 0 {
+            return Err(SceneError::Empty);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn validate_names_bad_vertex() {
+        let mut m = Mesh::new("m", vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]);
+        m.positions[1].y = f32::NAN;
+        let e = m.validate().unwrap_err();
+        assert!(e.to_string().contains("mesh 'm': vertex 1"), "{e}");
+    }
+
+    #[test]
+    fn degenerate_triangles_dropped() {
+        let mut m = Mesh::new(
+            "m",
+            vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(2.0, 0.0, 0.0)],
+            vec![[0, 1, 2], [0, 1, 3], [0, 0, 2]],
+        );
+        assert_eq!(m.drop_degenerate(), 2);
+        assert_eq!(m.indices, vec![[0, 1, 2]]);
+    }
+
+    #[test]
+    fn spot_falloff_edges() {
+        let d = Vec3::NEG_Y;
+        assert_eq!(Light::spot_falloff(d, d, 0.2, 0.4), 1.0);
+        let outside = Vec3::new(0.5f32.sin(), -0.5f32.cos(), 0.0);
+        assert_eq!(Light::spot_falloff(d, outside, 0.2, 0.4), 0.0);
+    }
+}

@@ -1,0 +1,1 @@
+//! bevy_ecs components, resources and systems.

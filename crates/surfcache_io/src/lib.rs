@@ -1,0 +1,1 @@
+//! glTF import/export and OpenEXR environment maps and textures.

@@ -1,0 +1,1 @@
+//! obvhs BVH, ray queries and the path tracer for incident radiance.
