@@ -5,7 +5,7 @@
 
 use core::f32::consts::{FRAC_1_PI, PI, TAU};
 use glam::{Vec2, Vec3};
-use rand_core::{RngCore, SeedableRng};
+use rand_core::RngCore;
 use rand_pcg::Pcg32;
 
 /// A small, fast, reproducible random stream (PCG32).

@@ -1,1 +1,30 @@
-//! obvhs BVH, ray queries and the path tracer for incident radiance.
+//! Ray tracing for surfcache: the obvhs BVH, ray queries, and the path tracer.
+//!
+//! - [`bvh`]: CWBVH over world triangles in a scale-normalised space; closest hit with
+//!   barycentrics, any hit for shadow rays, point queries.
+//! - [`traced_scene`]: a `Scene` flattened into world-space triangle arrays with its BVH,
+//!   surface points with the normal function ν, spawn offsets that scale with the scene,
+//!   and the nearest-surface lookup for query points.
+//! - [`path_tracer`]: unbiased incident radiance L_in(x, ω).
+//! - [`irradiance`]: Monte Carlo irradiance E(x, ν) with selectable samplers.
+//!
+//! ```
+//! use surfcache_core::{glam::Vec3, scenes};
+//! use surfcache_trace::TracedScene;
+//! let scene = TracedScene::new(&scenes::cornell()).unwrap();
+//! // Straight down from under the ceiling hits the floor.
+//! let hit = scene.closest_hit(Vec3::new(0.1, 0.5, 0.1), Vec3::NEG_Y, f32::INFINITY).unwrap();
+//! assert!((hit.t - 0.5).abs() < 1e-5);
+//! ```
+
+pub mod bvh;
+pub mod irradiance;
+pub mod path_tracer;
+pub mod traced_scene;
+
+pub use bvh::{Bvh, Hit};
+pub use irradiance::{
+    IrradianceEstimate, Query, Sampler, estimate_irradiance, reference_irradiance,
+};
+pub use path_tracer::PathOptions;
+pub use traced_scene::{SurfacePoint, TracedScene};

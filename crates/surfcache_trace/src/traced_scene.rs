@@ -1,0 +1,301 @@
+//! A [`Scene`] flattened into world-space triangles (structure of arrays) with its BVH:
+//! what the path tracer and every surface cache read.
+
+use crate::bvh::{Bvh, Hit};
+use glam::{Vec2, Vec3};
+use std::{ops::Range, sync::Arc};
+use surfcache_core::{
+    AlphaMode, Environment, Light, Material, Scene, SceneError,
+    geometry::{closest_point_barycentric, interpolate, triangle_point},
+};
+
+/// Spawned rays start this fraction of the scene diagonal above the surface, along the
+/// geometric normal of the side they leave (self-intersection avoidance that scales with
+/// the scene; far above both float precision in canonical space and obvhs' node epsilon).
+pub const SPAWN_OFFSET: f32 = 2e-5;
+
+/// Query points farther than this fraction of the diagonal from every surface are not on
+/// the scene (CONTRACT.md `query`).
+pub const SURFACE_TOLERANCE: f32 = 1e-4;
+
+/// A point on one side of a triangle, with the frame irradiance is measured in.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    pub position: Vec3,
+    pub triangle: u32,
+    /// Barycentrics (u, v).
+    pub uv: Vec2,
+    /// Unit geometric normal μ of the side the point is on.
+    pub geometric_normal: Vec3,
+    /// Unit shading normal ν on that side (never below the geometric surface).
+    pub shading_normal: Vec3,
+}
+
+/// World-space triangles in structure-of-arrays form, their materials, the lights and
+/// environment, and the BVH over them.
+pub struct TracedScene {
+    pub bvh: Bvh,
+    /// Corner positions per triangle (front face counter-clockwise, even under mirroring).
+    pub positions: Vec<[Vec3; 3]>,
+    /// Corner shading normals μ_A, μ_B, μ_C per triangle (world space, unit).
+    pub normals: Vec<[Vec3; 3]>,
+    /// Unit front-face geometric normal per triangle.
+    pub geometric_normals: Vec<Vec3>,
+    /// TEXCOORD_0 per corner (zero when the mesh has none).
+    pub uv0: Vec<[Vec2; 3]>,
+    /// Index into `materials` per triangle.
+    pub material: Vec<u32>,
+    /// Instance each triangle came from, and its index inside that instance's mesh.
+    pub instance: Vec<u32>,
+    pub local_triangle: Vec<u32>,
+    /// Triangle range of each instance.
+    pub instance_triangles: Vec<Range<u32>>,
+    pub materials: Vec<Arc<Material>>,
+    pub lights: Vec<Light>,
+    pub environment: Environment,
+    /// Whether any material is alpha-masked (then hits are filtered through the mask).
+    has_masks: bool,
+    diagonal: f32,
+}
+
+impl TracedScene {
+    /// Flattens `scene` into world space and builds the BVH.
+    pub fn new(scene: &Scene) -> Result<Self, SceneError> {
+        scene.validate()?;
+        let n = scene.triangle_count();
+        let mut s = TracedScene {
+            bvh: Bvh::build(&[]),
+            positions: Vec::with_capacity(n),
+            normals: Vec::with_capacity(n),
+            geometric_normals: Vec::with_capacity(n),
+            uv0: Vec::with_capacity(n),
+            material: Vec::with_capacity(n),
+            instance: Vec::with_capacity(n),
+            local_triangle: Vec::with_capacity(n),
+            instance_triangles: Vec::with_capacity(scene.instances.len()),
+            materials: Vec::new(),
+            lights: scene.lights.clone(),
+            environment: scene.environment.clone(),
+            has_masks: false,
+            diagonal: 1.0,
+        };
+        for (k, inst) in scene.instances.iter().enumerate() {
+            let material = match s
+                .materials
+                .iter()
+                .position(|m| Arc::ptr_eq(m, &inst.material))
+            {
+                Some(i) => i,
+                None => {
+                    s.materials.push(inst.material.clone());
+                    s.materials.len() - 1
+                }
+            } as u32;
+            let normal_matrix = inst.transform.matrix3.inverse().transpose();
+            // A mirroring transform reverses the winding; swap B and C to keep the front face.
+            let mirrored = inst.transform.matrix3.determinant() < 0.0;
+            let mesh = &inst.mesh;
+            let start = s.positions.len() as u32;
+            for (t, tri) in mesh.indices.iter().enumerate() {
+                let idx = if mirrored {
+                    [tri[0], tri[2], tri[1]]
+                } else {
+                    *tri
+                };
+                let p = idx.map(|i| inst.transform.transform_point3(mesh.positions[i as usize]));
+                let geo = (p[1] - p[0]).cross(p[2] - p[0]);
+                let Some(geo) = geo.try_normalize() else {
+                    continue; // degenerate after transformation
+                };
+                s.positions.push(p);
+                s.geometric_normals.push(geo);
+                s.normals.push(idx.map(|i| {
+                    let n = (normal_matrix * mesh.normals[i as usize]).normalize_or(geo);
+                    // The normal function must keep ⟨μ_X, μ⟩ > 0 (DESIGN.md §1).
+                    if n.dot(geo) > 0.0 { n } else { geo }
+                }));
+                s.uv0.push(if mesh.uv0.is_empty() {
+                    [Vec2::ZERO; 3]
+                } else {
+                    idx.map(|i| mesh.uv0[i as usize])
+                });
+                s.material.push(material);
+                s.instance.push(k as u32);
+                s.local_triangle.push(t as u32);
+            }
+            s.instance_triangles.push(start..s.positions.len() as u32);
+        }
+        if s.positions.is_empty() {
+            return Err(SceneError::Empty);
+        }
+        s.has_masks = s
+            .materials
+            .iter()
+            .any(|m| matches!(m.alpha_mode, AlphaMode::Mask(_)));
+        s.bvh = Bvh::build(&s.positions);
+        s.diagonal = s.bvh.scene_diagonal();
+        Ok(s)
+    }
+
+    /// Number of triangles traced.
+    pub fn triangle_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Diagonal of the scene's bounding box (world units).
+    pub fn diagonal(&self) -> f32 {
+        self.diagonal
+    }
+
+    /// Distance spawned rays start above their surface: [`SPAWN_OFFSET`] × diagonal.
+    pub fn spawn_offset(&self) -> f32 {
+        SPAWN_OFFSET * self.diagonal
+    }
+
+    /// Material of triangle `t`.
+    #[inline]
+    pub fn material_of(&self, t: u32) -> &Material {
+        &self.materials[self.material[t as usize] as usize]
+    }
+
+    /// TEXCOORD_0 at barycentrics `uv` of triangle `t`.
+    #[inline]
+    pub fn uv0_at(&self, t: u32, uv: Vec2) -> Vec2 {
+        let [a, b, c] = self.uv0[t as usize];
+        interpolate(a, b, c, uv)
+    }
+
+    /// Alpha-mask test of a candidate hit.
+    #[inline]
+    fn opaque_at(&self, t: u32, uv: Vec2) -> bool {
+        self.material_of(t).is_opaque_at(self.uv0_at(t, uv))
+    }
+
+    /// Closest surface along `origin + t·direction` for `t ∈ [0, tmax]`, honouring alpha masks.
+    #[inline]
+    pub fn closest_hit(&self, origin: Vec3, direction: Vec3, tmax: f32) -> Option<Hit> {
+        if self.has_masks {
+            let accept = |t: u32, uv: Vec2| self.opaque_at(t, uv);
+            self.bvh
+                .closest_hit_filtered(origin, direction, 0.0, tmax, Some(&accept))
+        } else {
+            self.bvh.closest_hit(origin, direction, 0.0, tmax)
+        }
+    }
+
+    /// Visibility V: whether anything blocks `origin + t·direction` for `t ∈ [0, tmax]`.
+    #[inline]
+    pub fn occluded(&self, origin: Vec3, direction: Vec3, tmax: f32) -> bool {
+        if self.has_masks {
+            let accept = |t: u32, uv: Vec2| self.opaque_at(t, uv);
+            self.bvh
+                .occluded_filtered(origin, direction, 0.0, tmax, Some(&accept))
+        } else {
+            self.bvh.occluded(origin, direction, 0.0, tmax)
+        }
+    }
+
+    /// The point at barycentrics `uv` of triangle `t`, on the front side (`front = true`)
+    /// or the back side. The shading normal is ν(u,v) = normalize(wμ_A + uμ_B + vμ_C)
+    /// (DESIGN.md §1), flipped to the side, and replaced by μ where it would point below
+    /// the geometric surface.
+    #[inline]
+    pub fn surface_point(&self, t: u32, uv: Vec2, front: bool) -> SurfacePoint {
+        let i = t as usize;
+        let [a, b, c] = self.positions[i];
+        let sign = if front { 1.0 } else { -1.0 };
+        let geo = self.geometric_normals[i] * sign;
+        let [na, nb, nc] = self.normals[i];
+        let shading = interpolate(na, nb, nc, uv) * sign;
+        let shading = match shading.try_normalize() {
+            Some(n) if n.dot(geo) > 1e-4 => n,
+            _ => geo,
+        };
+        SurfacePoint {
+            position: triangle_point(a, b, c, uv),
+            triangle: t,
+            uv,
+            geometric_normal: geo,
+            shading_normal: shading,
+        }
+    }
+
+    /// The surface point a ray hit, on the side the ray arrived from.
+    #[inline]
+    pub fn hit_point(&self, hit: &Hit, direction: Vec3) -> SurfacePoint {
+        let front = self.geometric_normals[hit.triangle as usize].dot(direction) < 0.0;
+        self.surface_point(hit.triangle, hit.uv, front)
+    }
+
+    /// Origin for rays leaving `p`: moved at least [`Self::spawn_offset`] inside its
+    /// triangle's edges (to the incentre for triangles too small for that), then lifted
+    /// the same distance along the geometric normal of its side. The edge step is the
+    /// thesis' leak guard: a wall that meets the triangle's edge is never closer to the
+    /// origin than the offset, so rays cannot slip past it.
+    #[inline]
+    pub fn spawn_origin(&self, p: &SurfacePoint) -> Vec3 {
+        let off = self.spawn_offset();
+        let [a, b, c] = self.positions[p.triangle as usize];
+        let mu = self.geometric_normals[p.triangle as usize];
+        let (la, lb, lc) = ((c - b).length(), (a - c).length(), (b - a).length());
+        let twice_area = (b - a).cross(c - a).length();
+        let inradius = twice_area / (la + lb + lc);
+        let mut q = p.position;
+        if inradius <= 2.0 * off {
+            q = (a * la + b * lb + c * lc) / (la + lb + lc);
+        } else {
+            for (e0, e1) in [(a, b), (b, c), (c, a)] {
+                // In-plane normal of the edge pointing into the (counter-clockwise) triangle.
+                let inward = mu.cross(e1 - e0).normalize();
+                let distance = (q - e0).dot(inward);
+                if distance < off {
+                    q += inward * (off - distance);
+                }
+            }
+        }
+        q + p.geometric_normal * off
+    }
+
+    /// The surface a query point `x` with normal `n` lies on (CONTRACT.md `query`): among
+    /// triangles within [`SURFACE_TOLERANCE`] × diagonal of `x`, the one whose geometric
+    /// normal is most nearly parallel to `n` (either orientation), then whose plane passes
+    /// closest to `x`; the side is the one whose geometric normal points along `n`.
+    /// `None` when no surface is that close.
+    pub fn locate(&self, x: Vec3, n: Vec3) -> Option<SurfacePoint> {
+        let radius = SURFACE_TOLERANCE * self.diagonal;
+        let n = n.normalize_or_zero();
+        // (parallelism, plane distance, point distance, triangle, uv)
+        let mut best: Option<(f32, f32, f32, u32, Vec2)> = None;
+        self.bvh.triangles_near(x, radius, |t| {
+            let [a, b, c] = self.positions[t as usize];
+            let uv = closest_point_barycentric(x, a, b, c);
+            let distance = (triangle_point(a, b, c, uv) - x).length();
+            if distance > radius {
+                return;
+            }
+            let mu = self.geometric_normals[t as usize];
+            let parallel = mu.dot(n).abs();
+            let plane = mu.dot(x - a).abs();
+            let better = match best {
+                None => true,
+                Some((bp, bd, bx, bt, _)) => {
+                    if (parallel - bp).abs() > 1e-3 {
+                        parallel > bp
+                    } else if (plane - bd).abs() > 1e-7 * self.diagonal {
+                        plane < bd
+                    } else if distance != bx {
+                        distance < bx
+                    } else {
+                        t < bt
+                    }
+                }
+            };
+            if better {
+                best = Some((parallel, plane, distance, t, uv));
+            }
+        });
+        let (_, _, _, t, uv) = best?;
+        let front = self.geometric_normals[t as usize].dot(n) >= 0.0;
+        Some(self.surface_point(t, uv, front))
+    }
+}

@@ -1,0 +1,282 @@
+//! Closed-form checks of the path-traced reference E(x, n) (issue: foundation).
+//!
+//! Each scene has an exact answer; the estimate must lie within 3 standard errors of it
+//! (plus a float-precision allowance where the estimator has no variance at all).
+
+use std::sync::Arc;
+use surfcache::core::{
+    Environment, Instance, Light, Material, Mesh, Scene,
+    glam::{Affine3A, Vec3},
+    scenes::{cuboid, quad},
+};
+use surfcache::trace::{PathOptions, Query, Sampler, TracedScene, reference_irradiance};
+
+fn instance(mesh: Mesh, material: Material) -> Instance {
+    Instance {
+        name: mesh.name.clone(),
+        mesh: Arc::new(mesh),
+        material: Arc::new(material),
+        transform: Affine3A::IDENTITY,
+    }
+}
+
+/// A square of half-size `h` in the plane y = 0, facing +Y.
+fn floor(h: f32, albedo: f32) -> Instance {
+    let v = Vec3::new;
+    instance(
+        quad(
+            "floor",
+            [v(-h, 0., -h), v(h, 0., -h), v(h, 0., h), v(-h, 0., h)],
+            Vec3::Y,
+        ),
+        Material::diffuse("floor", Vec3::splat(albedo)),
+    )
+}
+
+fn reference(
+    scene: &Scene,
+    queries: &[Query],
+    samples: u32,
+    sampler: Sampler,
+) -> Vec<(Vec3, Vec3)> {
+    reference_bounded(scene, queries, samples, sampler, PathOptions::default())
+}
+
+fn reference_bounded(
+    scene: &Scene,
+    queries: &[Query],
+    samples: u32,
+    sampler: Sampler,
+    options: PathOptions,
+) -> Vec<(Vec3, Vec3)> {
+    let traced = TracedScene::new(scene).unwrap();
+    reference_irradiance(&traced, queries, samples, sampler, 7, options, &|| {})
+        .into_iter()
+        .map(|e| {
+            let e = e.expect("query point must be on a surface");
+            (e.value, e.std_error)
+        })
+        .collect()
+}
+
+/// |E − expected| ≤ 3 se + 1e-4 expected + 1e-6 in every channel.
+fn assert_close(got: (Vec3, Vec3), expected: Vec3, what: &str) {
+    let (e, se) = got;
+    for c in 0..3 {
+        let tol = 3.0 * se[c] + 1e-4 * expected[c].abs() + 1e-6;
+        assert!(
+            (e[c] - expected[c]).abs() <= tol,
+            "{what}: channel {c}: got {} ± {}, expected {}",
+            e[c],
+            se[c],
+            expected[c]
+        );
+    }
+}
+
+#[test]
+fn plane_under_uniform_sky_receives_pi_l() {
+    let l = Vec3::new(0.5, 1.0, 2.0);
+    let scene = Scene {
+        instances: vec![floor(10.0, 0.5)],
+        environment: Environment::uniform(l),
+        ..Default::default()
+    };
+    let queries = [
+        Query {
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+        },
+        Query {
+            position: Vec3::new(3.0, 0.0, -2.0),
+            normal: Vec3::Y,
+        },
+        // The underside sees the sky's lower hemisphere, also uniform.
+        Query {
+            position: Vec3::new(1.0, 0.0, 1.0),
+            normal: Vec3::NEG_Y,
+        },
+    ];
+    for sampler in Sampler::ALL {
+        for (i, r) in reference(&scene, &queries, 4096, sampler)
+            .into_iter()
+            .enumerate()
+        {
+            assert_close(
+                r,
+                std::f32::consts::PI * l,
+                &format!("{sampler:?} point {i}"),
+            );
+        }
+    }
+}
+
+#[test]
+fn light_tight_box_stays_black_inside() {
+    // A closed 1 m box under a very bright sky; points on the floor's centre and 1 mm from
+    // walls, edges and corners.
+    let scene = Scene {
+        instances: vec![instance(
+            cuboid("box", Vec3::ZERO, Vec3::ONE, true),
+            Material::diffuse("wall", Vec3::splat(0.8)),
+        )],
+        environment: Environment::uniform(Vec3::splat(1e4)),
+        ..Default::default()
+    };
+    let mm = 1e-3;
+    let queries = [
+        Query {
+            position: Vec3::new(0.5, 0.0, 0.5),
+            normal: Vec3::Y,
+        },
+        Query {
+            position: Vec3::new(mm, 0.0, 0.5),
+            normal: Vec3::Y,
+        },
+        Query {
+            position: Vec3::new(mm, 0.0, mm),
+            normal: Vec3::Y,
+        },
+        Query {
+            position: Vec3::new(0.0, mm, mm),
+            normal: Vec3::X,
+        },
+        Query {
+            position: Vec3::new(1.0 - mm, 1.0, 1.0 - mm),
+            normal: Vec3::NEG_Y,
+        },
+    ];
+    for (i, (e, _)) in reference(&scene, &queries, 20_000, Sampler::Cosine)
+        .into_iter()
+        .enumerate()
+    {
+        assert_eq!(e, Vec3::ZERO, "point {i} leaked light");
+    }
+}
+
+#[test]
+fn furnace_box_matches_geometric_series() {
+    // Closed box whose inner walls emit Le with albedo ρ: E = π Le / (1 − ρ).
+    let (le, rho) = (Vec3::new(1.0, 2.0, 0.5), 0.6);
+    let mut wall = Material::emissive("wall", Vec3::splat(rho), le);
+    wall.double_sided = false;
+    let scene = Scene {
+        instances: vec![instance(
+            cuboid("box", Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0), true),
+            wall,
+        )],
+        ..Default::default()
+    };
+    let queries = [
+        Query {
+            position: Vec3::new(0.5, 0.0, 1.5),
+            normal: Vec3::Y,
+        },
+        Query {
+            position: Vec3::new(0.0, 1.999, 0.2),
+            normal: Vec3::X,
+        },
+    ];
+    let expected = std::f32::consts::PI * le / (1.0 - rho);
+    for (i, r) in reference(&scene, &queries, 40_000, Sampler::Cosine)
+        .into_iter()
+        .enumerate()
+    {
+        assert_close(r, expected, &format!("furnace point {i}"));
+    }
+}
+
+#[test]
+fn point_and_spot_lights_follow_inverse_square_cosine_law() {
+    let intensity = Vec3::new(3.0, 2.0, 1.0);
+    let position = Vec3::new(0.3, 2.0, -0.4);
+    let scene = Scene {
+        instances: vec![floor(10.0, 0.7)],
+        lights: vec![Light::Point {
+            position,
+            intensity,
+        }],
+        ..Default::default()
+    };
+    let points = [
+        Vec3::ZERO,
+        Vec3::new(2.0, 0.0, 1.0),
+        Vec3::new(-4.0, 0.0, 3.0),
+    ];
+    let queries: Vec<Query> = points
+        .iter()
+        .map(|&p| Query {
+            position: p,
+            normal: Vec3::Y,
+        })
+        .collect();
+    for (r, x) in reference(&scene, &queries, 64, Sampler::Cosine)
+        .into_iter()
+        .zip(points)
+    {
+        let d = position - x;
+        let expected = intensity * (d.normalize().y / d.length_squared());
+        assert_close(r, expected, "point light");
+    }
+}
+
+#[test]
+fn directional_light_gives_cosine_law_and_hard_shadow() {
+    // Light travelling down and towards +X at 30° from the vertical; a black box on a
+    // black floor, so nothing reflects and the shadow is exactly 0.
+    let es = Vec3::new(2.0, 1.5, 1.0);
+    let direction = Vec3::new(0.5, -(0.75f32.sqrt()), 0.0);
+    let scene = Scene {
+        instances: vec![
+            floor(10.0, 0.0),
+            instance(
+                cuboid(
+                    "blocker",
+                    Vec3::new(-0.5, 0.0, -0.5),
+                    Vec3::new(0.5, 1.0, 0.5),
+                    false,
+                ),
+                Material::diffuse("black", Vec3::ZERO),
+            ),
+        ],
+        lights: vec![Light::Directional {
+            direction,
+            irradiance: es,
+        }],
+        ..Default::default()
+    };
+    let lit = Query {
+        position: Vec3::new(-3.0, 0.0, 0.0),
+        normal: Vec3::Y,
+    };
+    // The shadow of the 1 m box reaches tan 30° ≈ 0.577 m beyond its +X face.
+    let shadow = Query {
+        position: Vec3::new(0.8, 0.0, 0.0),
+        normal: Vec3::Y,
+    };
+    let r = reference(&scene, &[lit, shadow], 16, Sampler::Cosine);
+    assert_close(r[0], es * 0.75f32.sqrt(), "lit floor");
+    assert_eq!(r[1].0, Vec3::ZERO, "shadowed floor");
+}
+
+#[test]
+fn bounce_limit_zero_counts_only_first_hits() {
+    // Furnace again with no indirect bounces: E = π Le exactly.
+    let le = Vec3::splat(1.0);
+    let scene = Scene {
+        instances: vec![instance(
+            cuboid("box", Vec3::ZERO, Vec3::ONE, true),
+            Material::emissive("wall", Vec3::splat(0.9), le),
+        )],
+        ..Default::default()
+    };
+    let q = [Query {
+        position: Vec3::new(0.5, 0.0, 0.5),
+        normal: Vec3::Y,
+    }];
+    let options = PathOptions {
+        max_bounces: Some(0),
+    };
+    let r = reference_bounded(&scene, &q, 2000, Sampler::Uniform, options);
+    assert_close(r[0], std::f32::consts::PI * le, "bounces=0");
+}
