@@ -280,3 +280,36 @@ fn bounce_limit_zero_counts_only_first_hits() {
     let r = reference_bounded(&scene, &q, 2000, Sampler::Uniform, options);
     assert_close(r[0], std::f32::consts::PI * le, "bounces=0");
 }
+
+#[test]
+fn spot_light_cone_falloff() {
+    // A spot pointing straight down: full intensity inside the inner cone, nothing outside
+    // the outer cone.
+    let intensity = Vec3::splat(5.0);
+    let position = Vec3::new(0.0, 2.0, 0.0);
+    let scene = Scene {
+        instances: vec![floor(10.0, 0.5)],
+        lights: vec![Light::Spot {
+            position,
+            direction: Vec3::NEG_Y,
+            intensity,
+            inner_cone_angle: 0.3,
+            outer_cone_angle: 0.5,
+        }],
+        ..Default::default()
+    };
+    let inside = Vec3::new(0.2, 0.0, 0.0); // 5.7° off axis
+    let outside = Vec3::new(2.0, 0.0, 0.0); // 45° off axis
+    let q = [inside, outside].map(|p| Query {
+        position: p,
+        normal: Vec3::Y,
+    });
+    let r = reference(&scene, &q, 16, Sampler::Cosine);
+    let d = position - inside;
+    assert_close(
+        r[0],
+        intensity * (d.normalize().y / d.length_squared()),
+        "inside cone",
+    );
+    assert_eq!(r[1].0, Vec3::ZERO, "outside cone");
+}
