@@ -193,18 +193,19 @@ impl Bvh {
     fn intersect(tri: &RtTriangle, ray: &Ray) -> f32 {
         let c = tri.v0 - ray.origin;
         let r = ray.direction.cross(c);
-        let det = tri.ng.dot(ray.direction);
-        let inv_det = 1.0 / det;
+        let inv_det = 1.0 / tri.ng.dot(ray.direction);
         let u = r.dot(tri.e2) * inv_det;
         let v = r.dot(tri.e1) * inv_det;
         let w = 1.0 - u - v;
-        if det != 0.0 && u >= -EDGE_SLACK && v >= -EDGE_SLACK && w >= -EDGE_SLACK {
-            let t = tri.ng.dot(c) * inv_det;
-            if t >= ray.tmin && t <= ray.tmax {
-                return t;
-            }
+        let t = tri.ng.dot(c) * inv_det;
+        // Non-short-circuit `&`: one well-predicted branch instead of six.
+        // (A zero determinant gives inv_det = ±∞ and NaN or infinite u, v, t: rejected.)
+        let inside = (u >= -EDGE_SLACK) & (v >= -EDGE_SLACK) & (w >= -EDGE_SLACK);
+        if inside & (t >= ray.tmin) & (t <= ray.tmax) {
+            t
+        } else {
+            f32::INFINITY
         }
-        f32::INFINITY
     }
 
     /// Barycentrics (u, v) of the ray's hit on slot `slot`, clamped into the triangle.

@@ -1,0 +1,105 @@
+//! `surfcache rays`: ray files for `trace` benchmarks.
+
+use crate::{
+    points::write_atomically,
+    scene_args::{EnvArgs, LoadedWorld},
+};
+use anyhow::{Result, bail};
+use glam::{Vec2, Vec3};
+use std::path::PathBuf;
+use surfcache_core::{
+    geometry::to_world,
+    sampling::{Rng, cosine_hemisphere, uniform_triangle},
+};
+
+#[derive(clap::Args)]
+pub struct RaysArgs {
+    /// A .gltf/.glb file or a built-in scene name (cornell).
+    scene: String,
+    /// `surface`: origins uniform over the surface area (random side, lifted by the spawn
+    /// offset) with cosine-distributed directions; `camera`: a pinhole camera's primary rays.
+    #[arg(long, default_value = "surface")]
+    kind: String,
+    /// Number of rays.
+    #[arg(long, default_value_t = 1_000_000)]
+    count: usize,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Camera eye and target `ex,ey,ez,tx,ty,tz` [default: inside the scene's bounds,
+    /// 45% of its depth in front of the centre, looking along +Z].
+    #[arg(long, value_name = "EX,EY,EZ,TX,TY,TZ")]
+    camera: Option<String>,
+    /// Vertical field of view of the camera in degrees.
+    #[arg(long, default_value_t = 60.0)]
+    fov: f32,
+    /// Output RAYS.bin.
+    #[arg(short = 'o', long = "out")]
+    output: PathBuf,
+}
+
+pub fn run(args: RaysArgs) -> Result<()> {
+    let loaded = LoadedWorld::load(&args.scene, &EnvArgs::default())?;
+    let scene = loaded.traced()?;
+    let mut rng = Rng::new(args.seed, 0);
+    let mut out = Vec::with_capacity(args.count * 32);
+    let mut push = |o: Vec3, d: Vec3| {
+        for v in [o.x, o.y, o.z, d.x, d.y, d.z, 0.0, f32::INFINITY] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    };
+    match args.kind.as_str() {
+        "surface" => {
+            // Pick triangles by area through the cumulative distribution.
+            let mut cdf = Vec::with_capacity(scene.triangle_count());
+            let mut total = 0.0f64;
+            for [a, b, c] in &scene.positions {
+                total += 0.5 * (*b - *a).cross(*c - *a).length() as f64;
+                cdf.push(total);
+            }
+            for _ in 0..args.count {
+                let x = rng.next_f32() as f64 * total;
+                let t = cdf.partition_point(|&c| c < x).min(cdf.len() - 1) as u32;
+                let uv = uniform_triangle(rng.next_vec2());
+                let p = scene.surface_point(t, uv, rng.next_f32() < 0.5);
+                let d = to_world(cosine_hemisphere(rng.next_vec2()), p.geometric_normal);
+                push(scene.spawn_origin(&p), d);
+            }
+        }
+        "camera" => {
+            let (lo, hi) = scene.positions.iter().flatten().fold(
+                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+                |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+            );
+            let (eye, target) = match &args.camera {
+                Some(s) => {
+                    let v: Vec<f32> = s
+                        .split(',')
+                        .map(|x| x.trim().parse::<f32>())
+                        .collect::<Result<_, _>>()
+                        .map_err(|e| anyhow::anyhow!("--camera '{s}': {e}"))?;
+                    if v.len() != 6 || v.iter().any(|x| !x.is_finite()) {
+                        bail!("--camera needs six finite numbers ex,ey,ez,tx,ty,tz");
+                    }
+                    (Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5]))
+                }
+                None => {
+                    let c = 0.5 * (lo + hi);
+                    let eye = c - Vec3::Z * 0.45 * (hi.z - lo.z);
+                    (eye, eye + Vec3::Z)
+                }
+            };
+            let forward = (target - eye).normalize();
+            let right = forward.cross(Vec3::Y).try_normalize().unwrap_or(Vec3::X);
+            let up = right.cross(forward);
+            let side = (args.count as f32).sqrt().ceil() as usize;
+            let half = (args.fov.to_radians() * 0.5).tan();
+            for k in 0..args.count {
+                let (i, j) = (k % side, k / side);
+                let s = (Vec2::new(i as f32, j as f32) + 0.5) / side as f32 * 2.0 - 1.0;
+                push(eye, (forward + right * s.x * half - up * s.y * half).normalize());
+            }
+        }
+        other => bail!("unknown ray kind '{other}' (known: surface, camera)"),
+    }
+    write_atomically(&args.output, &out)
+}

@@ -1,0 +1,83 @@
+//! The query-point CSV (`x,y,z,nx,ny,nz`) and result CSV (`x,y,z,r,g,b[,rel_std]`).
+
+use anyhow::{Context, Result, bail};
+use glam::Vec3;
+use std::{io::Write, path::Path};
+use surfcache_trace::Query;
+
+/// Reads `x,y,z,nx,ny,nz` rows; rejects a wrong header, short rows and non-finite numbers.
+pub fn read_points(path: &Path) -> Result<Vec<Query>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read points file '{}'", path.display()))?;
+    let mut lines = text.lines().enumerate();
+    let header = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
+    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    if columns != ["x", "y", "z", "nx", "ny", "nz"] {
+        bail!(
+            "points file '{}': header must be 'x,y,z,nx,ny,nz', found '{header}'",
+            path.display()
+        );
+    }
+    let mut queries = Vec::new();
+    for (i, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let values: Vec<f32> = line
+            .split(',')
+            .map(|v| v.trim().parse::<f32>())
+            .collect::<Result<_, _>>()
+            .map_err(|e| anyhow::anyhow!("points file '{}' line {}: {e}", path.display(), i + 1))?;
+        if values.len() != 6 {
+            bail!(
+                "points file '{}' line {}: expected 6 values, found {}",
+                path.display(),
+                i + 1,
+                values.len()
+            );
+        }
+        if values.iter().any(|v| !v.is_finite()) {
+            bail!("points file '{}' line {}: non-finite value", path.display(), i + 1);
+        }
+        let normal = Vec3::new(values[3], values[4], values[5]);
+        if normal.length_squared() == 0.0 {
+            bail!("points file '{}' line {}: zero normal", path.display(), i + 1);
+        }
+        queries.push(Query {
+            position: Vec3::new(values[0], values[1], values[2]),
+            normal: normal.normalize(),
+        });
+    }
+    Ok(queries)
+}
+
+/// Writes the result CSV to `path` (through a temporary file renamed into place) or stdout.
+pub fn write_results(path: Option<&Path>, header: &str, rows: &[String]) -> Result<()> {
+    let mut text = String::with_capacity(rows.len() * 64 + header.len() + 1);
+    text.push_str(header);
+    text.push('\n');
+    for row in rows {
+        text.push_str(row);
+        text.push('\n');
+    }
+    match path {
+        Some(path) => write_atomically(path, text.as_bytes()),
+        None => {
+            std::io::stdout()
+                .lock()
+                .write_all(text.as_bytes())
+                .context("cannot write to stdout")
+        }
+    }
+}
+
+/// Writes `bytes` to a temporary sibling of `path` and renames it into place, so a failure
+/// never leaves a half-written file under the final name.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let name = path
+        .file_name()
+        .with_context(|| format!("'{}' is not a file path", path.display()))?;
+    let tmp = path.with_file_name(format!(".{}.tmp", name.to_string_lossy()));
+    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write '{}'", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("cannot write '{}'", path.display()))
+}
