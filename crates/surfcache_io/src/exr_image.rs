@@ -1,0 +1,207 @@
+//! Linear-RGB OpenEXR images: equirectangular environment maps and lightmap textures.
+
+use crate::IoError;
+use crate::error::no_panic;
+use crate::file_replace::replace_with;
+use exr::prelude::{
+    AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, ReadChannels, ReadLayers,
+    SpecificChannels, WritableImage,
+};
+use std::path::Path;
+use surfcache_core::EnvironmentMap;
+use surfcache_core::glam::Vec3;
+
+/// Largest image accepted, in pixels (guards allocations against corrupt headers).
+const MAX_PIXELS: usize = 1 << 28;
+
+/// Reads an equirectangular radiance map (CONTRACT.md convention; negative values are
+/// clamped to 0 with one warning).
+pub fn read_environment_map(path: &Path) -> Result<(EnvironmentMap, Vec<String>), IoError> {
+    let (width, height, mut texels, mut warnings) = read_rgb(path)?;
+    let mut negative = 0usize;
+    for t in &mut texels {
+        let clamped = t.max(Vec3::ZERO);
+        negative += (clamped != *t) as usize;
+        *t = clamped;
+    }
+    if negative > 0 {
+        warnings.push(format!(
+            "EXR '{}': {negative} pixels had negative values, clamped to 0",
+            path.display()
+        ));
+    }
+    Ok((
+        EnvironmentMap {
+            width,
+            height,
+            texels,
+        },
+        warnings,
+    ))
+}
+
+/// Reads the R, G, B channels of an EXR's first layer as (width, height, row-major texels,
+/// row 0 at the top); every value must be finite.
+pub fn read_rgb_exr(path: &Path) -> Result<(u32, u32, Vec<Vec3>), IoError> {
+    let (w, h, texels, _) = read_rgb(path)?;
+    Ok((w, h, texels))
+}
+
+/// Writes a linear-RGB f32 EXR (ZIP scanlines, `Encoding::SMALL_LOSSLESS`) through a
+/// temporary file renamed into place; `texels` are row-major, row 0 at the top.
+pub fn write_rgb_exr(path: &Path, width: u32, height: u32, texels: &[Vec3]) -> Result<(), IoError> {
+    let (w, h) = (width as usize, height as usize);
+    if w == 0 || h == 0 || w.checked_mul(h) != Some(texels.len()) {
+        return Err(IoError::write(
+            path,
+            format!("{} texels given for a {width}×{height} image", texels.len()),
+        ));
+    }
+    if let Some(i) = texels.iter().position(|t| !t.is_finite()) {
+        return Err(IoError::write(
+            path,
+            format!(
+                "pixel ({}, {}) is not finite: {:?}",
+                i % w,
+                i / w,
+                texels[i]
+            ),
+        ));
+    }
+    let channels = SpecificChannels::rgb(|p: exr::prelude::Vec2<usize>| {
+        let t = texels.get(p.1 * w + p.0).copied().unwrap_or(Vec3::ZERO);
+        (t.x, t.y, t.z)
+    });
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::default(),
+        Encoding::SMALL_LOSSLESS,
+        channels,
+    );
+    let image = Image::from_layer(layer);
+    replace_with(path, |tmp| {
+        image.write().to_file(tmp).map_err(|e| e.to_string())
+    })
+}
+
+/// One channel of the image: its name and samples (data window, row-major).
+type Channel = exr::image::AnyChannel<FlatSamples>;
+
+/// Finds the R, G, B channels: plain `R`, `G`, `B`, else the first `prefix.R` with matching
+/// `prefix.G` and `prefix.B`.
+fn find_rgb(channels: &[Channel]) -> Option<[&Channel; 3]> {
+    let named = |n: &str| channels.iter().find(|c| c.name.to_string() == n);
+    if let (Some(r), Some(g), Some(b)) = (named("R"), named("G"), named("B")) {
+        return Some([r, g, b]);
+    }
+    channels.iter().find_map(|c| {
+        let name = c.name.to_string();
+        let prefix = name.strip_suffix(".R")?;
+        Some([
+            c,
+            named(&format!("{prefix}.G"))?,
+            named(&format!("{prefix}.B"))?,
+        ])
+    })
+}
+
+/// Reads the first layer's RGB into the display window (pixels outside the data window are
+/// black, with a warning), rejecting NaN and infinities.
+fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> {
+    let image = no_panic("EXR decoding", || {
+        exr::prelude::read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .from_file(path)
+    })
+    .map_err(|e| IoError::read("EXR", path, e))?
+    .map_err(|e| match e {
+        exr::error::Error::Io(io) => IoError::read("EXR", path, io),
+        other => IoError::read(
+            "EXR",
+            path,
+            format!("not a readable OpenEXR file ({other})"),
+        ),
+    })?;
+    let layer: &Layer<AnyChannels<FlatSamples>> = &image.layer_data;
+    let channels = &layer.channel_data.list;
+    let Some(rgb) = find_rgb(channels) else {
+        let found: Vec<String> = channels.iter().map(|c| c.name.to_string()).collect();
+        return Err(IoError::MissingChannels {
+            path: path.to_path_buf(),
+            found: if found.is_empty() {
+                "none".into()
+            } else {
+                found.join(", ")
+            },
+        });
+    };
+    let (dw, dh) = (layer.size.0, layer.size.1);
+    let n = dw.checked_mul(dh).unwrap_or(usize::MAX);
+    for c in rgb {
+        if c.sample_data.len() != n {
+            return Err(IoError::exr(
+                path,
+                format!(
+                    "channel {} is subsampled ({} samples for {dw}×{dh} pixels), which is not supported",
+                    c.name,
+                    c.sample_data.len()
+                ),
+            ));
+        }
+    }
+    let display = image.attributes.display_window;
+    let (width, height) = (display.size.0, display.size.1);
+    if width == 0 || height == 0 || width.saturating_mul(height) > MAX_PIXELS {
+        return Err(IoError::exr(
+            path,
+            format!("unsupported display window size {width}×{height}"),
+        ));
+    }
+    let (Ok(w32), Ok(h32)) = (u32::try_from(width), u32::try_from(height)) else {
+        return Err(IoError::exr(path, "image too large"));
+    };
+    // Data-window origin relative to the display window.
+    let ox = layer.attributes.layer_position.0 as i64 - display.position.0 as i64;
+    let oy = layer.attributes.layer_position.1 as i64 - display.position.1 as i64;
+    let mut warnings = Vec::new();
+    if ox != 0 || oy != 0 || dw != width || dh != height {
+        warnings.push(format!(
+            "EXR '{}': data window {dw}×{dh} at ({ox}, {oy}) differs from the {width}×{height} display window; pixels outside it are black",
+            path.display()
+        ));
+    }
+    let mut texels = vec![Vec3::ZERO; width * height];
+    const NAMES: [&str; 3] = ["R", "G", "B"];
+    for y in 0..dh {
+        let ty = y as i64 + oy;
+        for x in 0..dw {
+            let tx = x as i64 + ox;
+            let mut v = [0.0f32; 3];
+            for (k, c) in rgb.iter().enumerate() {
+                let s = c.sample_data.value_by_flat_index(y * dw + x).to_f32();
+                if !s.is_finite() {
+                    let what = if s.is_nan() {
+                        "NaN"
+                    } else if s > 0.0 {
+                        "+infinity"
+                    } else {
+                        "-infinity"
+                    };
+                    return Err(IoError::exr(
+                        path,
+                        format!("pixel ({tx}, {ty}) channel {} is {what}", NAMES[k]),
+                    ));
+                }
+                v[k] = s;
+            }
+            if (0..width as i64).contains(&tx) && (0..height as i64).contains(&ty) {
+                texels[ty as usize * width + tx as usize] = Vec3::from_array(v);
+            }
+        }
+    }
+    Ok((w32, h32, texels, warnings))
+}
