@@ -7,7 +7,7 @@
 //! - [`ecs`]: bevy_ecs components, resources and systems;
 //! - [`cli`]: the `surfcache` command-line tool.
 
-
+pub use surfcache_cli as cli;
 pub use surfcache_core as core;
 pub use surfcache_ecs as ecs;
 pub use surfcache_io as io;

@@ -9,7 +9,7 @@ mod commands;
 mod points;
 mod scene_args;
 
-use clap::{Parser, Subcommand};
+use clap::Parser;
 use std::process::ExitCode;
 
 const ABOUT: &str = "Bakes diffuse global illumination into surface caches.
@@ -50,6 +50,3 @@ pub fn main() -> ExitCode {
         }
     }
 }
-
-#[doc(hidden)]
-pub use Subcommand as _Subcommand;

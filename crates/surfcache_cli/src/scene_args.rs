@@ -1,7 +1,7 @@
 //! Scene and environment options shared by the commands, and loading them into a world.
 
 use anyhow::{Context, Result, anyhow, bail};
-use bevy_ecs::prelude::*;
+use bevy_ecs::{schedule::Schedule, world::World};
 use clap::Args;
 use glam::Vec3;
 use std::{path::PathBuf, sync::Arc};
@@ -61,8 +61,6 @@ impl EnvArgs {
 /// A scene loaded into a `bevy_ecs` world with the surfcache schedule run once.
 pub struct LoadedWorld {
     pub world: World,
-    pub schedule: Schedule,
-    pub scene_name: String,
 }
 
 impl LoadedWorld {
@@ -98,11 +96,7 @@ impl LoadedWorld {
         if let Some(e) = &resource.error {
             return Err(anyhow!("scene '{scene_arg}': {e}"));
         }
-        Ok(Self {
-            world,
-            schedule,
-            scene_name: scene_arg.to_string(),
-        })
+        Ok(Self { world })
     }
 
     /// The traced scene the BVH system built.
