@@ -37,11 +37,19 @@ pub fn read_points(path: &Path) -> Result<Vec<Query>> {
             );
         }
         if values.iter().any(|v| !v.is_finite()) {
-            bail!("points file '{}' line {}: non-finite value", path.display(), i + 1);
+            bail!(
+                "points file '{}' line {}: non-finite value",
+                path.display(),
+                i + 1
+            );
         }
         let normal = Vec3::new(values[3], values[4], values[5]);
         if normal.length_squared() == 0.0 {
-            bail!("points file '{}' line {}: zero normal", path.display(), i + 1);
+            bail!(
+                "points file '{}' line {}: zero normal",
+                path.display(),
+                i + 1
+            );
         }
         queries.push(Query {
             position: Vec3::new(values[0], values[1], values[2]),
@@ -62,12 +70,10 @@ pub fn write_results(path: Option<&Path>, header: &str, rows: &[String]) -> Resu
     }
     match path {
         Some(path) => write_atomically(path, text.as_bytes()),
-        None => {
-            std::io::stdout()
-                .lock()
-                .write_all(text.as_bytes())
-                .context("cannot write to stdout")
-        }
+        None => std::io::stdout()
+            .lock()
+            .write_all(text.as_bytes())
+            .context("cannot write to stdout"),
     }
 }
 

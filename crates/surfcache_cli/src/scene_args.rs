@@ -30,7 +30,9 @@ fn parse_rgb(s: &str) -> Result<Vec3, String> {
         .collect::<Result<_, _>>()?;
     match v.as_slice() {
         [r, g, b] if v.iter().all(|x| x.is_finite() && *x >= 0.0) => Ok(Vec3::new(*r, *g, *b)),
-        _ => Err(format!("'{s}' is not three finite non-negative numbers R,G,B")),
+        _ => Err(format!(
+            "'{s}' is not three finite non-negative numbers R,G,B"
+        )),
     }
 }
 

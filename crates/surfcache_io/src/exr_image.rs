@@ -140,7 +140,7 @@ fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> 
         });
     };
     let (dw, dh) = (layer.size.0, layer.size.1);
-    let n = dw.checked_mul(dh).unwrap_or(usize::MAX);
+    let n = dw.saturating_mul(dh);
     for c in rgb {
         if c.sample_data.len() != n {
             return Err(IoError::exr(

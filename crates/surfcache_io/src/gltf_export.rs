@@ -107,7 +107,7 @@ impl BinaryBuilder {
             "byteLength": self.bin.len() - offset,
             "target": target,
         }));
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         self.views.len() - 1

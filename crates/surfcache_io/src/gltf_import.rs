@@ -458,7 +458,7 @@ fn decode_primitive(
             None => Vec::new(),
         },
         _ => {
-            if corners.len() % 3 != 0 {
+            if !corners.len().is_multiple_of(3) {
                 out.warnings.push(format!(
                     "mesh '{name}' has {} indices, not a multiple of 3; the last {} ignored",
                     corners.len(),

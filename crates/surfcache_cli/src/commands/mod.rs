@@ -72,7 +72,11 @@ pub fn run(command: Command) -> Result<()> {
         Command::Trace(args) => trace::run(args),
         Command::Rays(args) => rays::run(args),
         Command::Export(args) => export::run(args),
-        Command::Bake(_) => bail!("bake is not yet implemented (the surface caches land with the caches issue)"),
-        Command::Query(_) => bail!("query is not yet implemented (the surface caches land with the caches issue)"),
+        Command::Bake(_) => {
+            bail!("bake is not yet implemented (the surface caches land with the caches issue)")
+        }
+        Command::Query(_) => {
+            bail!("query is not yet implemented (the surface caches land with the caches issue)")
+        }
     }
 }

@@ -96,7 +96,10 @@ pub fn run(args: RaysArgs) -> Result<()> {
             for k in 0..args.count {
                 let (i, j) = (k % side, k / side);
                 let s = (Vec2::new(i as f32, j as f32) + 0.5) / side as f32 * 2.0 - 1.0;
-                push(eye, (forward + right * s.x * half - up * s.y * half).normalize());
+                push(
+                    eye,
+                    (forward + right * s.x * half - up * s.y * half).normalize(),
+                );
             }
         }
         other => bail!("unknown ray kind '{other}' (known: surface, camera)"),

@@ -41,7 +41,11 @@ pub struct ReferenceArgs {
 pub fn run(args: ReferenceArgs) -> Result<()> {
     let Some(sampler) = Sampler::from_name(&args.sampler) else {
         let known: Vec<&str> = Sampler::ALL.iter().map(|s| s.name()).collect();
-        bail!("unknown sampler '{}' (known: {})", args.sampler, known.join(", "));
+        bail!(
+            "unknown sampler '{}' (known: {})",
+            args.sampler,
+            known.join(", ")
+        );
     };
     if args.samples == 0 {
         bail!("--samples must be at least 1");
@@ -57,9 +61,15 @@ pub fn run(args: ReferenceArgs) -> Result<()> {
         max_bounces: args.bounces,
     };
     let results = with_threads(args.threads, || {
-        reference_irradiance(&scene, &queries, args.samples, sampler, args.seed, options, &|| {
-            bar.inc(1)
-        })
+        reference_irradiance(
+            &scene,
+            &queries,
+            args.samples,
+            sampler,
+            args.seed,
+            options,
+            &|| bar.inc(1),
+        )
     })?;
     bar.finish_and_clear();
     let mut off_surface = 0;
@@ -71,7 +81,16 @@ pub fn run(args: ReferenceArgs) -> Result<()> {
             match r {
                 Some(e) => {
                     let v = e.value;
-                    format!("{},{},{},{},{},{},{}", p.x, p.y, p.z, v.x, v.y, v.z, e.relative_std())
+                    format!(
+                        "{},{},{},{},{},{},{}",
+                        p.x,
+                        p.y,
+                        p.z,
+                        v.x,
+                        v.y,
+                        v.z,
+                        e.relative_std()
+                    )
                 }
                 None => {
                     off_surface += 1;
