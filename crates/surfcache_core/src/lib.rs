@@ -7,13 +7,14 @@
 //! The ECS components in `surfcache_ecs` wrap these types; the tracer in
 //! `surfcache_trace` flattens them into world-space triangles.
 
+pub mod color;
 pub mod environment;
 pub mod geometry;
 pub mod sampling;
 pub mod scene;
 pub mod scenes;
 
-pub use environment::{Environment, EnvironmentMap};
+pub use environment::{Environment, EnvironmentMap, EnvironmentSampler};
 pub use scene::{AlphaMode, Instance, Light, Material, Mesh, Scene, SceneError, Texture};
 
 /// glam types used throughout surfcache's public API.

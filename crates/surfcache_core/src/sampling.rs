@@ -122,6 +122,102 @@ pub fn uniform_sphere(u: Vec2) -> Vec3 {
     Vec3::new(r * phi.cos(), r * phi.sin(), z)
 }
 
+/// A piecewise-constant distribution over `n` bins of [0, 1) with probabilities
+/// proportional to non-negative weights (pbrt-v4 §A.1, `PiecewiseConstant1D`).
+///
+/// ```
+/// use surfcache_core::sampling::Distribution1D;
+/// let d = Distribution1D::new(&[1.0, 3.0]);
+/// assert_eq!(d.sample(0.5).0, 1);
+/// assert!((d.pmf(1) - 0.75).abs() < 1e-6);
+/// ```
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Distribution1D {
+    /// cdf[i] = Σ_{k<i} w_k / Σ w, with cdf[n] = 1.
+    cdf: Vec<f32>,
+    /// Σ w (0 when every weight is zero: the distribution is then uniform).
+    total: f64,
+}
+
+impl Distribution1D {
+    /// Builds the distribution; non-finite or negative weights count as zero. All-zero
+    /// weights give the uniform distribution.
+    pub fn new(weights: &[f32]) -> Self {
+        let clean = |w: f32| {
+            if w.is_finite() && w > 0.0 {
+                w as f64
+            } else {
+                0.0
+            }
+        };
+        let total: f64 = weights.iter().map(|&w| clean(w)).sum();
+        let n = weights.len();
+        let mut cdf = Vec::with_capacity(n + 1);
+        cdf.push(0.0);
+        let mut acc = 0.0f64;
+        for (i, &w) in weights.iter().enumerate() {
+            acc += if total > 0.0 { clean(w) } else { 1.0 };
+            let denom = if total > 0.0 { total } else { n as f64 };
+            cdf.push(if i + 1 == n {
+                1.0
+            } else {
+                (acc / denom) as f32
+            });
+        }
+        Self { cdf, total }
+    }
+
+    /// Number of bins.
+    pub fn len(&self) -> usize {
+        self.cdf.len().saturating_sub(1)
+    }
+
+    /// True for a distribution over no bins.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Σ w of the weights it was built from.
+    pub fn total(&self) -> f64 {
+        self.total
+    }
+
+    /// Probability of bin `i`.
+    #[inline]
+    pub fn pmf(&self, i: usize) -> f32 {
+        self.cdf[i + 1] - self.cdf[i]
+    }
+
+    /// Inverts the cdf at `u ∈ [0,1)`: the bin, its probability, and `u` remapped to [0,1)
+    /// inside the bin (so one random number serves both the choice and the position).
+    #[inline]
+    pub fn sample(&self, u: f32) -> (usize, f32, f32) {
+        let n = self.len();
+        // First bin whose upper cdf exceeds u, skipping zero-probability bins.
+        let i = self.cdf[1..].partition_point(|&c| c <= u).min(n - 1);
+        let (lo, hi) = (self.cdf[i], self.cdf[i + 1]);
+        let pmf = hi - lo;
+        let remapped = if pmf > 0.0 {
+            ((u - lo) / pmf).clamp(0.0, ONE_MINUS_EPSILON)
+        } else {
+            0.5
+        };
+        (i, pmf, remapped)
+    }
+}
+
+/// The largest f32 below 1.
+pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
+/// Owen-scrambled Sobol points (Burley 2020, "Practical Hash-based Owen Scrambling"),
+/// one independent progressive sequence per `seed`: every aligned power-of-two run of
+/// indices is a stratified (0, m, 2)-net in each consecutive pair of dimensions.
+/// At most 2¹⁶ indices per seed.
+#[inline]
+pub fn sobol_4d(index: u32, dimension_set: u32, seed: u32) -> [f32; 4] {
+    sobol_burley::sample_4d(index & 0xFFFF, dimension_set, seed)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -149,6 +245,38 @@ mod tests {
             .sum::<f64>()
             / n as f64;
         assert!((mean - 2.0 / 3.0).abs() < 3e-3, "{mean}");
+    }
+
+    #[test]
+    fn distribution_matches_weights() {
+        let d = Distribution1D::new(&[0.0, 1.0, 0.0, 3.0]);
+        assert_eq!(d.len(), 4);
+        let mut counts = [0u32; 4];
+        let mut rng = Rng::new(5, 6);
+        for _ in 0..40_000 {
+            let (i, p, r) = d.sample(rng.next_f32());
+            assert!((0.0..1.0).contains(&r));
+            assert!((p - d.pmf(i)).abs() < 1e-7 && p > 0.0);
+            counts[i] += 1;
+        }
+        assert_eq!((counts[0], counts[2]), (0, 0));
+        let share = counts[3] as f32 / 40_000.0;
+        assert!((share - 0.75).abs() < 0.01, "{share}");
+        let uniform = Distribution1D::new(&[0.0, 0.0]);
+        assert_eq!(uniform.pmf(0), 0.5);
+    }
+
+    #[test]
+    fn sobol_points_are_stratified() {
+        // 16 points of one aligned run hit each of the 4×4 strata once.
+        for seed in [0, 17] {
+            let mut hit = [false; 16];
+            for i in 0..16 {
+                let [x, y, ..] = sobol_4d(i, 0, seed);
+                hit[(x * 4.0) as usize * 4 + (y * 4.0) as usize] = true;
+            }
+            assert!(hit.iter().all(|&h| h));
+        }
     }
 
     #[test]

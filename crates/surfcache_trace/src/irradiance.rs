@@ -1,34 +1,56 @@
-//! Monte Carlo estimation of irradiance E(x, ν) = ∫_H L_in(x, ω) ⟨ν, ω⟩ dω at one point.
+//! Monte Carlo estimation of irradiance E(x, ν) = ∫_H L_in(x, ω) ⟨ν, ω⟩ dω at one point,
+//! with a selectable sampler and the thesis' adaptive stopping rule (DESIGN.md §2).
 
 use crate::{
-    path_tracer::PathOptions,
+    path_tracer::{FirstHit, PathOptions},
     traced_scene::{SurfacePoint, TracedScene},
 };
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use surfcache_core::{
     geometry::to_world,
-    sampling::{Rng, UNIFORM_HEMISPHERE_PDF, cosine_hemisphere, uniform_hemisphere},
+    sampling::{
+        Rng, UNIFORM_HEMISPHERE_PDF, cosine_hemisphere, cosine_hemisphere_pdf, sobol_4d,
+        splitmix64, uniform_hemisphere,
+    },
 };
 
-/// How hemisphere directions are drawn.
+/// How the hemisphere integral is sampled.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Sampler {
-    /// Uniform over the hemisphere, p = 1/(2π): the thesis' sampler.
+    /// Uniform directions over the hemisphere, p = 1/(2π), pseudo-random: the thesis.
     Uniform,
-    /// Cosine-weighted, p = cos θ/π.
-    #[default]
+    /// Cosine-weighted directions, p = cos θ/π, pseudo-random.
     Cosine,
+    /// Cosine-weighted directions from Owen-scrambled Sobol points, scrambled per point.
+    Qmc,
+    /// Cosine-weighted directions plus next-event estimation to emissive triangles and the
+    /// environment map (importance-sampled), combined by multiple importance sampling;
+    /// pseudo-random.
+    Mis,
+    /// Everything: [`Sampler::Mis`] with its first-bounce dimensions (direction, light
+    /// choice, point on the light) drawn from per-point scrambled Sobol points.
+    #[default]
+    Best,
 }
 
 impl Sampler {
     /// All samplers, in the order the CLI lists them.
-    pub const ALL: [Sampler; 2] = [Sampler::Uniform, Sampler::Cosine];
+    pub const ALL: [Sampler; 5] = [
+        Sampler::Uniform,
+        Sampler::Cosine,
+        Sampler::Qmc,
+        Sampler::Mis,
+        Sampler::Best,
+    ];
 
     /// The name used on the command line.
     pub fn name(self) -> &'static str {
         match self {
             Sampler::Uniform => "uniform",
             Sampler::Cosine => "cosine",
+            Sampler::Qmc => "qmc",
+            Sampler::Mis => "mis",
+            Sampler::Best => "best",
         }
     }
 
@@ -36,7 +58,22 @@ impl Sampler {
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|s| s.name() == name)
     }
+
+    /// Whether first-bounce dimensions come from scrambled Sobol points.
+    pub fn quasi_random(self) -> bool {
+        matches!(self, Sampler::Qmc | Sampler::Best)
+    }
+
+    /// Whether paths use next-event estimation with MIS.
+    pub fn next_event(self) -> bool {
+        matches!(self, Sampler::Mis | Sampler::Best)
+    }
 }
+
+/// Independent randomised QMC replicates: sample `k` of a point belongs to replicate
+/// `k mod R`. The standard error comes from the spread of the replicate means, which
+/// (unlike the spread of single samples) sees the stratification's gain.
+pub const QMC_REPLICATES: u32 = 16;
 
 /// Running sums of the samples X_i of one estimate (f64, so millions of samples stay exact).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -69,36 +106,89 @@ impl Accumulator {
         let var = ((self.sum_sq - self.sum * self.sum / n) / (n - 1.0)).max(DVec3::ZERO);
         (var / n).map(f64::sqrt)
     }
+}
 
-    /// Coefficient of variation of the mean, C = se / (Ē + ε), maximum over the channels
-    /// (DESIGN.md §2). `floor` is ε.
-    pub fn relative_error(&self, floor: f64) -> f64 {
-        let se = self.std_error();
-        let mean = self.mean();
-        (0..3)
-            .map(|c| {
-                if se[c] == 0.0 {
-                    0.0
-                } else {
-                    se[c] / (mean[c] + floor)
-                }
-            })
-            .fold(0.0, f64::max)
+/// Coefficient of variation of the mean, C = se / (Ē + ε), the maximum over the channels
+/// (DESIGN.md §2); a channel with no spread counts as exact.
+pub fn relative_error(mean: DVec3, std_error: DVec3, floor: f64) -> f64 {
+    (0..3)
+        .map(|c| {
+            if std_error[c] == 0.0 {
+                0.0
+            } else {
+                std_error[c] / (mean[c].max(0.0) + floor)
+            }
+        })
+        .fold(0.0, f64::max)
+}
+
+/// How one estimate is computed and when it stops.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EstimatorSettings {
+    pub sampler: Sampler,
+    /// Stop once C = se/(Ē + ε) ≤ this bound (0: always draw `max_samples`).
+    pub max_rel_error: f32,
+    /// Never fewer hemisphere samples than this.
+    pub min_samples: u32,
+    /// Never more hemisphere samples than this.
+    pub max_samples: u32,
+    /// The absolute floor ε of the relative error, W/m².
+    pub floor: f32,
+    /// Bounce limit (next-event estimation follows from `sampler`).
+    pub max_bounces: Option<u32>,
+}
+
+impl Default for EstimatorSettings {
+    fn default() -> Self {
+        Self {
+            sampler: Sampler::Best,
+            max_rel_error: 0.01,
+            min_samples: 256,
+            max_samples: 65_536,
+            floor: 0.0,
+            max_bounces: None,
+        }
+    }
+}
+
+impl EstimatorSettings {
+    /// Exactly `samples` samples, no early stop.
+    pub fn fixed(sampler: Sampler, samples: u32, max_bounces: Option<u32>) -> Self {
+        Self {
+            sampler,
+            max_rel_error: 0.0,
+            min_samples: samples,
+            max_samples: samples,
+            floor: 0.0,
+            max_bounces,
+        }
+    }
+
+    fn path_options(&self) -> PathOptions {
+        PathOptions {
+            max_bounces: self.max_bounces,
+            next_event: self.sampler.next_event(),
+        }
     }
 }
 
 /// One irradiance estimate.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct IrradianceEstimate {
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Estimate {
     /// Ē in W/m² (hemisphere samples plus the exact punctual-light part).
     pub value: Vec3,
     /// Standard error of `value` per channel.
     pub std_error: Vec3,
     /// Hemisphere samples drawn.
     pub samples: u32,
+    /// C = se / (Ē + ε), the largest over the channels.
+    pub rel_error: f32,
+    /// Share of samples whose first ray hit the back face of a single-sided surface: near
+    /// 1 for points buried inside closed geometry.
+    pub back_face_share: f32,
 }
 
-impl IrradianceEstimate {
+impl Estimate {
     /// Standard error over value, the largest over channels with light (0 for black).
     pub fn relative_std(&self) -> f32 {
         (0..3)
@@ -108,54 +198,150 @@ impl IrradianceEstimate {
     }
 }
 
-/// One sample X = L_in(x, ω) ⟨ν, ω⟩ / p(ω) of the hemisphere integral at `p`, with ω drawn
-/// by `sampler` about the shading normal ν. Directions under the geometric surface carry
-/// no light (CONTRACT.md) and give X = 0.
+/// One sample X of the hemisphere integral at `p` (shading normal ν, geometric normal μ),
+/// rays leaving from `origin`. `root` holds the first-bounce dimensions: direction (0, 1),
+/// light choice (2) and point on the light (3, 4); deeper bounces draw from `rng`.
+///
+/// Without next-event estimation X = L_in(ω) ⟨ν, ω⟩ / p(ω), with ω drawn uniformly
+/// (p = 1/2π) or cosine-weighted (p = cos θ/π, X = π L_in). With it, X adds the light
+/// sample of [`TracedScene::direct_light_sample`] and the continuation's emission is
+/// MIS-weighted. Directions under the geometric surface carry no light (CONTRACT.md).
 #[inline]
 pub fn hemisphere_sample(
     scene: &TracedScene,
     p: &SurfacePoint,
     origin: Vec3,
     sampler: Sampler,
+    root: [f32; 5],
     rng: &mut Rng,
     options: PathOptions,
-) -> Vec3 {
-    let u = rng.next_vec2();
-    let (local, weight) = match sampler {
+) -> (Vec3, FirstHit) {
+    let u = Vec2::new(root[0], root[1]);
+    let mut x = Vec3::ZERO;
+    if options.next_event {
+        x += scene.direct_light_sample(p, origin, root[2], Vec2::new(root[3], root[4]));
+    }
+    let (local, weight, pdf) = match sampler {
         Sampler::Uniform => {
             let l = uniform_hemisphere(u);
-            (l, l.z / UNIFORM_HEMISPHERE_PDF)
+            (l, l.z / UNIFORM_HEMISPHERE_PDF, UNIFORM_HEMISPHERE_PDF)
         }
         // cos θ / (cos θ/π) = π
-        Sampler::Cosine => (cosine_hemisphere(u), core::f32::consts::PI),
+        _ => {
+            let l = cosine_hemisphere(u);
+            (l, core::f32::consts::PI, cosine_hemisphere_pdf(l.z))
+        }
     };
     let w = to_world(local, p.shading_normal);
     if w.dot(p.geometric_normal) <= 0.0 || local.z <= 0.0 {
-        return Vec3::ZERO;
+        return (x, FirstHit::Miss);
     }
-    scene.incident_radiance(origin, w, rng, options) * weight
+    let path = scene.incident_radiance(origin, w, Some(pdf), rng, options);
+    (x + path.radiance * weight, path.first_hit)
 }
 
-/// E(x, ν) at `p` from `samples` hemisphere samples plus the punctual lights' exact part.
-pub fn estimate_irradiance(
+/// Draws samples of E at `p` until C ≤ `settings.max_rel_error` (checked after every
+/// round of [`QMC_REPLICATES`] samples, from `min_samples` on) or `max_samples` are
+/// drawn (DESIGN.md §2), and adds the punctual lights' exact part.
+///
+/// `key` identifies the point: sample streams are keyed by (`seed`, `key`), so the
+/// result does not depend on threads, batching or frames. Pseudo-random samplers take
+/// the standard error from single samples (the thesis' formula); quasi-random ones from
+/// the spread of [`QMC_REPLICATES`] independently scrambled replicates.
+pub fn estimate(
     scene: &TracedScene,
     p: &SurfacePoint,
-    samples: u32,
-    sampler: Sampler,
-    rng: &mut Rng,
-    options: PathOptions,
-) -> IrradianceEstimate {
-    let origin = scene.spawn_origin(p);
-    let mut acc = Accumulator::default();
-    for _ in 0..samples {
-        acc.add(hemisphere_sample(scene, p, origin, sampler, rng, options));
+    origin: Vec3,
+    settings: &EstimatorSettings,
+    seed: u64,
+    key: u64,
+) -> Estimate {
+    let options = settings.path_options();
+    let sampler = settings.sampler;
+    let mut rng = Rng::new(seed, key);
+    let punctual = scene.punctual_irradiance_from(p, origin);
+    let floor = settings.floor as f64;
+    let bound = settings.max_rel_error as f64;
+    let max = settings.max_samples.max(1);
+    let min = settings.min_samples.clamp(1, max);
+    let mut back = 0u32;
+    // Pseudo-random: one accumulator. Quasi-random: one per replicate.
+    let mut single = Accumulator::default();
+    let mut replicates = [Accumulator::default(); QMC_REPLICATES as usize];
+    // One Owen scrambling per replicate, keyed by (seed, key, replicate).
+    let point = splitmix64(seed ^ splitmix64(key ^ 0x5bd1_e995_0000_0000));
+    let streams: [u32; QMC_REPLICATES as usize] =
+        core::array::from_fn(|r| splitmix64(point ^ r as u64) as u32);
+    let mut n = 0u32;
+    let (mean, std_error) = loop {
+        let round_end = (n + QMC_REPLICATES).min(max);
+        while n < round_end {
+            let root = if sampler.quasi_random() {
+                let stream = streams[(n % QMC_REPLICATES) as usize];
+                let index = n / QMC_REPLICATES;
+                let [a, b, c, d] = sobol_4d(index, 0, stream);
+                let [e, ..] = sobol_4d(index, 1, stream);
+                [a, b, c, d, e]
+            } else {
+                let mut r = [0.0; 5];
+                r.iter_mut().for_each(|v| *v = rng.next_f32());
+                r
+            };
+            let (x, first) = hemisphere_sample(scene, p, origin, sampler, root, &mut rng, options);
+            back += (first == FirstHit::Back) as u32;
+            if sampler.quasi_random() {
+                replicates[(n % QMC_REPLICATES) as usize].add(x);
+            } else {
+                single.add(x);
+            }
+            n += 1;
+        }
+        let (mean, se) = if sampler.quasi_random() {
+            replicate_statistics(&replicates)
+        } else {
+            (single.mean(), single.std_error())
+        };
+        let total = mean + punctual.as_dvec3();
+        if n >= max || (n >= min && relative_error(total, se, floor) <= bound) {
+            break (mean, se);
+        }
+    };
+    let value = (mean + punctual.as_dvec3()).as_vec3();
+    let std_error = if n < 2 {
+        Vec3::ZERO
+    } else {
+        std_error.as_vec3()
+    };
+    Estimate {
+        value,
+        std_error,
+        samples: n,
+        rel_error: relative_error(value.as_dvec3(), std_error.as_dvec3(), floor) as f32,
+        back_face_share: back as f32 / n as f32,
     }
-    let punctual = scene.punctual_irradiance(p);
-    IrradianceEstimate {
-        value: acc.mean().as_vec3() + punctual,
-        std_error: acc.std_error().as_vec3(),
-        samples,
+}
+
+/// Mean and standard error from randomised QMC replicates: the mean of all samples, and
+/// the spread of the replicate means over √R.
+fn replicate_statistics(replicates: &[Accumulator]) -> (DVec3, DVec3) {
+    let filled = || replicates.iter().filter(|a| a.count > 0);
+    let n: u32 = filled().map(|a| a.count).sum();
+    let sum: DVec3 = filled().map(|a| a.sum).sum();
+    let mean = sum / n.max(1) as f64;
+    let r = filled().count();
+    if r < 2 {
+        return (mean, DVec3::splat(f64::INFINITY));
     }
+    // Unbiased variance of replicate means around the overall mean (equal counts at
+    // round boundaries, where it is evaluated).
+    let var_means: DVec3 = filled()
+        .map(|a| {
+            let d = a.mean() - mean;
+            d * d
+        })
+        .sum::<DVec3>()
+        / (r as f64 - 1.0);
+    (mean, (var_means / r as f64).map(f64::sqrt))
 }
 
 /// A query: a world-space point on a surface and the normal of the side asked about.
@@ -165,27 +351,25 @@ pub struct Query {
     pub normal: Vec3,
 }
 
-/// Brute-force reference E(x, n) at each query point with `samples` hemisphere samples,
-/// in parallel over points. Point `i` draws from `Rng::new(seed, i)`, so the result does
-/// not depend on the thread count. `None` marks a point that is not on any surface.
-/// `progress` is called once per finished point.
+/// Brute-force reference E(x, n) at each query point with a fixed number of samples,
+/// in parallel over points. Point `i` is keyed `i`, so the result does not depend on the
+/// thread count. `None` marks a point that is not on any surface. `progress` is called
+/// once per finished point.
 pub fn reference_irradiance(
     scene: &TracedScene,
     queries: &[Query],
-    samples: u32,
-    sampler: Sampler,
+    settings: &EstimatorSettings,
     seed: u64,
-    options: PathOptions,
     progress: &(dyn Fn() + Sync),
-) -> Vec<Option<IrradianceEstimate>> {
+) -> Vec<Option<Estimate>> {
     use rayon::prelude::*;
     queries
         .par_iter()
         .enumerate()
         .map(|(i, q)| {
             let p = scene.locate(q.position, q.normal)?;
-            let mut rng = Rng::new(seed, i as u64);
-            let e = estimate_irradiance(scene, &p, samples, sampler, &mut rng, options);
+            let origin = scene.spawn_origin(&p);
+            let e = estimate(scene, &p, origin, settings, seed, i as u64);
             progress();
             Some(e)
         })

@@ -6,7 +6,9 @@
 //!   surface points with the normal function ν, spawn offsets that scale with the scene,
 //!   and the nearest-surface lookup for query points.
 //! - [`path_tracer`]: unbiased incident radiance L_in(x, ω).
-//! - [`irradiance`]: Monte Carlo irradiance E(x, ν) with selectable samplers.
+//! - [`light_sampling`]: emitters and environment map for next-event estimation.
+//! - [`irradiance`]: Monte Carlo irradiance E(x, ν) with selectable samplers and the
+//!   adaptive relative-error stopping rule.
 //!
 //! ```
 //! use surfcache_core::{glam::Vec3, scenes};
@@ -19,12 +21,12 @@
 
 pub mod bvh;
 pub mod irradiance;
+pub mod light_sampling;
 pub mod path_tracer;
 pub mod traced_scene;
 
 pub use bvh::{Bvh, Hit};
-pub use irradiance::{
-    IrradianceEstimate, Query, Sampler, estimate_irradiance, reference_irradiance,
-};
-pub use path_tracer::PathOptions;
+pub use irradiance::{Estimate, EstimatorSettings, Query, Sampler, estimate, reference_irradiance};
+pub use light_sampling::LightSampler;
+pub use path_tracer::{FirstHit, PathOptions};
 pub use traced_scene::{SurfacePoint, TracedScene};

@@ -1,20 +1,47 @@
-//! Unbiased path tracing of incident radiance L_in(x, ω) over two-sided Lambertian surfaces.
+//! Unbiased path tracing of incident radiance L_in(x, ω) over two-sided Lambertian surfaces,
+//! with or without next-event estimation.
 
-use crate::traced_scene::{SurfacePoint, TracedScene};
-use glam::Vec3;
+use crate::{
+    light_sampling::power_heuristic,
+    traced_scene::{SurfacePoint, TracedScene},
+};
+use glam::{Vec2, Vec3};
 use surfcache_core::{
     Light,
     geometry::to_world,
-    sampling::{Rng, cosine_hemisphere},
+    sampling::{Rng, cosine_hemisphere, cosine_hemisphere_pdf},
 };
 
-/// Limits of one path.
+/// Limits and techniques of one path.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PathOptions {
     /// Maximum number of indirect bounces (reflections after the first hit); `None` runs
     /// until Russian roulette ends the path. `Some(0)` counts only what the first hit emits
     /// plus the environment.
     pub max_bounces: Option<u32>,
+    /// Next-event estimation: at every bounce a shadow ray towards an emissive triangle or
+    /// the environment map, combined with the cosine-sampled continuation by multiple
+    /// importance sampling (power heuristic).
+    pub next_event: bool,
+}
+
+/// What the first segment of a path met, for detecting points buried inside geometry.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FirstHit {
+    /// The ray escaped to the environment.
+    #[default]
+    Miss,
+    /// The front face of a triangle, or either face of a double-sided material.
+    Front,
+    /// The back face of a single-sided material: the origin may be inside a closed object.
+    Back,
+}
+
+/// Light arriving along one path, and what its first segment hit.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PathSample {
+    pub radiance: Vec3,
+    pub first_hit: FirstHit,
 }
 
 impl TracedScene {
@@ -23,7 +50,11 @@ impl TracedScene {
     /// `E_s cos θ` for directional lights, with cos θ = ⟨ν, ω_l⟩ about the shading normal and
     /// nothing from below the geometric surface (CONTRACT.md).
     pub fn punctual_irradiance(&self, p: &SurfacePoint) -> Vec3 {
-        let origin = self.spawn_origin(p);
+        self.punctual_irradiance_from(p, self.spawn_origin(p))
+    }
+
+    /// [`Self::punctual_irradiance`] with shadow rays leaving from `origin`.
+    pub fn punctual_irradiance_from(&self, p: &SurfacePoint, origin: Vec3) -> Vec3 {
         let mut e = Vec3::ZERO;
         for light in &self.lights {
             let (to_light, distance, arriving) = match *light {
@@ -69,6 +100,39 @@ impl TracedScene {
         e
     }
 
+    /// Next-event estimate of the irradiance-like integral ∫ L_e(ω) ⟨ν, ω⟩ dω at `p` from
+    /// one light sample (`select`, `u`), MIS-weighted against cosine sampling about ν
+    /// (density `cos θ/π`): L_e ⟨ν,ω⟩ / p_l · w_l (Veach 1997, §9.2). Zero for directions
+    /// below the shading or geometric surface and for occluded samples.
+    #[inline]
+    pub fn direct_light_sample(
+        &self,
+        p: &SurfacePoint,
+        origin: Vec3,
+        select: f32,
+        u: Vec2,
+    ) -> Vec3 {
+        // Sampled as seen from the ray origin, so the shadow ray ends exactly on the light.
+        let Some(ls) = self.light_sampler.sample(self, origin, select, u) else {
+            return Vec3::ZERO;
+        };
+        let cos = p.shading_normal.dot(ls.direction);
+        if cos <= 0.0 || p.geometric_normal.dot(ls.direction) <= 0.0 {
+            return Vec3::ZERO;
+        }
+        // Stop short of the sampled point so the emitter itself does not occlude it.
+        let tmax = if ls.distance.is_finite() {
+            ls.distance - self.spawn_offset()
+        } else {
+            f32::INFINITY
+        };
+        if tmax <= 0.0 || self.occluded(origin, ls.direction, tmax) {
+            return Vec3::ZERO;
+        }
+        let weight = power_heuristic(ls.pdf, cosine_hemisphere_pdf(cos));
+        ls.radiance * (cos * weight / ls.pdf)
+    }
+
     /// One path-traced estimate of L_in(origin, ω): the radiance arriving at `origin` from
     /// direction `direction` (unit). Along the path it adds what surfaces emit towards it,
     /// the environment where it escapes, and punctual lights by shadow rays at every
@@ -76,27 +140,56 @@ impl TracedScene {
     /// directions about the shading normal (weight ρ), directions under the geometric
     /// surface end the path, and Russian roulette with survival probability
     /// min(max throughput, 0.95) keeps the estimate unbiased (pbrt-v4 §14.1.5).
+    ///
+    /// With [`PathOptions::next_event`], every bounce also samples a light (see
+    /// [`Self::direct_light_sample`]) and emission found by the continuation rays is
+    /// weighted by the power heuristic; `direction_pdf` is the solid-angle density with
+    /// which the caller drew `direction` (cosine sampling), or `None` when emission along
+    /// it must be counted in full.
     pub fn incident_radiance(
         &self,
         origin: Vec3,
         direction: Vec3,
+        direction_pdf: Option<f32>,
         rng: &mut Rng,
         options: PathOptions,
-    ) -> Vec3 {
+    ) -> PathSample {
+        let nee = options.next_event && !self.light_sampler.is_empty();
         let mut radiance = Vec3::ZERO;
         let mut throughput = Vec3::ONE;
         let (mut o, mut d) = (origin, direction);
+        let mut pdf = direction_pdf.filter(|_| nee);
+        let mut first_hit = None;
         let mut bounce = 0u32;
         loop {
             let Some(hit) = self.closest_hit(o, d, f32::INFINITY) else {
-                radiance += throughput * self.environment.radiance(d);
+                let mut weight = 1.0;
+                if let Some(p_bsdf) = pdf {
+                    weight = power_heuristic(p_bsdf, self.light_sampler.pdf_environment(d));
+                }
+                radiance += throughput * self.environment.radiance(d) * weight;
+                first_hit.get_or_insert(FirstHit::Miss);
                 break;
             };
+            let t = hit.triangle;
+            let material = self.material_of(t);
+            let front = self.geometric_normals[t as usize].dot(d) < 0.0;
+            first_hit.get_or_insert(if front || material.double_sided {
+                FirstHit::Front
+            } else {
+                FirstHit::Back
+            });
             let p = self.hit_point(&hit, d);
-            let material = self.material_of(hit.triangle);
-            let uv0 = self.uv0_at(hit.triangle, hit.uv);
-            let front = self.geometric_normals[hit.triangle as usize].dot(d) < 0.0;
-            radiance += throughput * material.emission_at(uv0, front);
+            let uv0 = self.uv0_at(t, hit.uv);
+            let emitted = material.emission_at(uv0, front);
+            if emitted != Vec3::ZERO {
+                let mut weight = 1.0;
+                if let Some(p_bsdf) = pdf {
+                    let p_light = self.light_sampler.pdf_emitter(self, t, o, p.position, d);
+                    weight = power_heuristic(p_bsdf, p_light);
+                }
+                radiance += throughput * emitted * weight;
+            }
             if options.max_bounces.is_some_and(|b| bounce >= b) {
                 break;
             }
@@ -104,11 +197,15 @@ impl TracedScene {
             if albedo == Vec3::ZERO {
                 break;
             }
+            let spawn = self.spawn_origin(&p);
+            let reflect = throughput * albedo * core::f32::consts::FRAC_1_PI;
             if !self.lights.is_empty() {
-                radiance += throughput
-                    * albedo
-                    * core::f32::consts::FRAC_1_PI
-                    * self.punctual_irradiance(&p);
+                radiance += reflect * self.punctual_irradiance_from(&p, spawn);
+            }
+            if nee {
+                let select = rng.next_f32();
+                let u = rng.next_vec2();
+                radiance += reflect * self.direct_light_sample(&p, spawn, select, u);
             }
             throughput *= albedo;
             let survive = throughput.max_element().min(0.95);
@@ -116,14 +213,19 @@ impl TracedScene {
                 break;
             }
             throughput /= survive;
-            let w = to_world(cosine_hemisphere(rng.next_vec2()), p.shading_normal);
+            let local = cosine_hemisphere(rng.next_vec2());
+            let w = to_world(local, p.shading_normal);
             if w.dot(p.geometric_normal) <= 0.0 {
                 break;
             }
-            o = self.spawn_origin(&p);
+            pdf = nee.then(|| cosine_hemisphere_pdf(local.z));
+            o = spawn;
             d = w;
             bounce += 1;
         }
-        radiance
+        PathSample {
+            radiance,
+            first_hit: first_hit.unwrap_or_default(),
+        }
     }
 }

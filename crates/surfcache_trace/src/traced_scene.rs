@@ -1,7 +1,10 @@
 //! A [`Scene`] flattened into world-space triangles (structure of arrays) with its BVH:
 //! what the path tracer and every surface cache read.
 
-use crate::bvh::{Bvh, Hit};
+use crate::{
+    bvh::{Bvh, Hit},
+    light_sampling::LightSampler,
+};
 use glam::{Vec2, Vec3};
 use std::{ops::Range, sync::Arc};
 use surfcache_core::{
@@ -43,6 +46,11 @@ pub struct TracedScene {
     pub geometric_normals: Vec<Vec3>,
     /// TEXCOORD_0 per corner (zero when the mesh has none).
     pub uv0: Vec<[Vec2; 3]>,
+    /// TEXCOORD_1 (lightmap layout) per corner, for instances whose mesh has it; empty
+    /// when no mesh has one (see [`Self::has_uv1`]).
+    pub uv1: Vec<[Vec2; 3]>,
+    /// Whether each instance's mesh has TEXCOORD_1.
+    pub has_uv1: Vec<bool>,
     /// Index into `materials` per triangle.
     pub material: Vec<u32>,
     /// Instance each triangle came from, and its index inside that instance's mesh.
@@ -53,6 +61,8 @@ pub struct TracedScene {
     pub materials: Vec<Arc<Material>>,
     pub lights: Vec<Light>,
     pub environment: Environment,
+    /// Emitters and environment for next-event estimation.
+    pub light_sampler: LightSampler,
     /// Whether any material is alpha-masked (then hits are filtered through the mask).
     has_masks: bool,
     diagonal: f32,
@@ -69,6 +79,8 @@ impl TracedScene {
             normals: Vec::with_capacity(n),
             geometric_normals: Vec::with_capacity(n),
             uv0: Vec::with_capacity(n),
+            uv1: Vec::new(),
+            has_uv1: Vec::with_capacity(scene.instances.len()),
             material: Vec::with_capacity(n),
             instance: Vec::with_capacity(n),
             local_triangle: Vec::with_capacity(n),
@@ -76,9 +88,11 @@ impl TracedScene {
             materials: Vec::new(),
             lights: scene.lights.clone(),
             environment: scene.environment.clone(),
+            light_sampler: LightSampler::default(),
             has_masks: false,
             diagonal: 1.0,
         };
+        let any_uv1 = scene.instances.iter().any(|i| !i.mesh.uv1.is_empty());
         for (k, inst) in scene.instances.iter().enumerate() {
             let material = match s
                 .materials
@@ -96,6 +110,7 @@ impl TracedScene {
             let mirrored = inst.transform.matrix3.determinant() < 0.0;
             let mesh = &inst.mesh;
             let start = s.positions.len() as u32;
+            s.has_uv1.push(!mesh.uv1.is_empty());
             for (t, tri) in mesh.indices.iter().enumerate() {
                 let idx = if mirrored {
                     [tri[0], tri[2], tri[1]]
@@ -119,6 +134,13 @@ impl TracedScene {
                 } else {
                     idx.map(|i| mesh.uv0[i as usize])
                 });
+                if any_uv1 {
+                    s.uv1.push(if mesh.uv1.is_empty() {
+                        [Vec2::ZERO; 3]
+                    } else {
+                        idx.map(|i| mesh.uv1[i as usize])
+                    });
+                }
                 s.material.push(material);
                 s.instance.push(k as u32);
                 s.local_triangle.push(t as u32);
@@ -134,6 +156,7 @@ impl TracedScene {
             .any(|m| matches!(m.alpha_mode, AlphaMode::Mask(_)));
         s.bvh = Bvh::build(&s.positions);
         s.diagonal = s.bvh.scene_diagonal();
+        s.light_sampler = LightSampler::new(&s);
         Ok(s)
     }
 

@@ -7,7 +7,7 @@ use crate::{
 use anyhow::{Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
-use surfcache_trace::{PathOptions, Sampler, reference_irradiance};
+use surfcache_trace::{EstimatorSettings, Sampler, reference_irradiance};
 
 #[derive(clap::Args)]
 pub struct ReferenceArgs {
@@ -24,8 +24,9 @@ pub struct ReferenceArgs {
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Hemisphere sampler: uniform (the thesis) or cosine.
-    #[arg(long, default_value = "cosine")]
+    /// Hemisphere sampler: uniform (the thesis), cosine, qmc (cosine + scrambled Sobol),
+    /// mis (cosine + next-event estimation with MIS), best (mis + scrambled Sobol).
+    #[arg(long, default_value = "best")]
     sampler: String,
     /// Maximum number of indirect bounces [default: unlimited, Russian roulette].
     #[arg(long)]
@@ -57,19 +58,9 @@ pub fn run(args: ReferenceArgs) -> Result<()> {
         ProgressStyle::with_template("reference {bar:40} {pos}/{len} points, eta {eta}")
             .expect("static template"),
     );
-    let options = PathOptions {
-        max_bounces: args.bounces,
-    };
+    let settings = EstimatorSettings::fixed(sampler, args.samples, args.bounces);
     let results = with_threads(args.threads, || {
-        reference_irradiance(
-            &scene,
-            &queries,
-            args.samples,
-            sampler,
-            args.seed,
-            options,
-            &|| bar.inc(1),
-        )
+        reference_irradiance(&scene, &queries, &settings, args.seed, &|| bar.inc(1))
     })?;
     bar.finish_and_clear();
     let mut off_surface = 0;
