@@ -2,7 +2,7 @@
 //! with a selectable sampler and the thesis' adaptive stopping rule (DESIGN.md §2).
 
 use crate::{
-    path_tracer::{FirstHit, PathOptions},
+    path_tracer::{FirstHit, PathOptions, PathSample},
     traced_scene::{SurfacePoint, TracedScene},
 };
 use glam::{DVec3, Vec2, Vec3};
@@ -186,6 +186,8 @@ pub struct Estimate {
     /// Share of samples whose first ray hit the back face of a single-sided surface: near
     /// 1 for points buried inside closed geometry.
     pub back_face_share: f32,
+    /// Rays traced (closest-hit and shadow rays).
+    pub rays: u64,
 }
 
 impl Estimate {
@@ -215,11 +217,13 @@ pub fn hemisphere_sample(
     root: [f32; 5],
     rng: &mut Rng,
     options: PathOptions,
-) -> (Vec3, FirstHit) {
+) -> (Vec3, PathSample) {
     let u = Vec2::new(root[0], root[1]);
     let mut x = Vec3::ZERO;
+    let mut rays = 0;
     if options.next_event {
-        x += scene.direct_light_sample(p, origin, root[2], Vec2::new(root[3], root[4]));
+        let light = Vec2::new(root[3], root[4]);
+        x += scene.direct_light_sample(p, origin, root[2], light, &mut rays);
     }
     let (local, weight, pdf) = match sampler {
         Sampler::Uniform => {
@@ -234,10 +238,15 @@ pub fn hemisphere_sample(
     };
     let w = to_world(local, p.shading_normal);
     if w.dot(p.geometric_normal) <= 0.0 || local.z <= 0.0 {
-        return (x, FirstHit::Miss);
+        let path = PathSample {
+            rays,
+            ..Default::default()
+        };
+        return (x, path);
     }
-    let path = scene.incident_radiance(origin, w, Some(pdf), rng, options);
-    (x + path.radiance * weight, path.first_hit)
+    let mut path = scene.incident_radiance(origin, w, Some(pdf), rng, options);
+    path.rays += rays;
+    (x + path.radiance * weight, path)
 }
 
 /// Draws samples of E at `p` until C ≤ `settings.max_rel_error` (checked after every
@@ -259,7 +268,9 @@ pub fn estimate(
     let options = settings.path_options();
     let sampler = settings.sampler;
     let mut rng = Rng::new(seed, key);
-    let punctual = scene.punctual_irradiance_from(p, origin);
+    let mut punctual_rays = 0;
+    let punctual = scene.punctual_irradiance_from(p, origin, &mut punctual_rays);
+    let mut rays = punctual_rays as u64;
     let floor = settings.floor as f64;
     let bound = settings.max_rel_error as f64;
     let max = settings.max_samples.max(1);
@@ -287,8 +298,9 @@ pub fn estimate(
                 r.iter_mut().for_each(|v| *v = rng.next_f32());
                 r
             };
-            let (x, first) = hemisphere_sample(scene, p, origin, sampler, root, &mut rng, options);
-            back += (first == FirstHit::Back) as u32;
+            let (x, path) = hemisphere_sample(scene, p, origin, sampler, root, &mut rng, options);
+            back += (path.first_hit == FirstHit::Back) as u32;
+            rays += path.rays as u64;
             if sampler.quasi_random() {
                 replicates[(n % QMC_REPLICATES) as usize].add(x);
             } else {
@@ -318,6 +330,7 @@ pub fn estimate(
         samples: n,
         rel_error: relative_error(value.as_dvec3(), std_error.as_dvec3(), floor) as f32,
         back_face_share: back as f32 / n as f32,
+        rays,
     }
 }
 

@@ -42,6 +42,8 @@ pub enum FirstHit {
 pub struct PathSample {
     pub radiance: Vec3,
     pub first_hit: FirstHit,
+    /// Rays traced for it (closest-hit and shadow rays).
+    pub rays: u32,
 }
 
 impl TracedScene {
@@ -50,11 +52,12 @@ impl TracedScene {
     /// `E_s cos θ` for directional lights, with cos θ = ⟨ν, ω_l⟩ about the shading normal and
     /// nothing from below the geometric surface (CONTRACT.md).
     pub fn punctual_irradiance(&self, p: &SurfacePoint) -> Vec3 {
-        self.punctual_irradiance_from(p, self.spawn_origin(p))
+        self.punctual_irradiance_from(p, self.spawn_origin(p), &mut 0)
     }
 
-    /// [`Self::punctual_irradiance`] with shadow rays leaving from `origin`.
-    pub fn punctual_irradiance_from(&self, p: &SurfacePoint, origin: Vec3) -> Vec3 {
+    /// [`Self::punctual_irradiance`] with shadow rays leaving from `origin`; adds the
+    /// shadow rays traced to `rays`.
+    pub fn punctual_irradiance_from(&self, p: &SurfacePoint, origin: Vec3, rays: &mut u32) -> Vec3 {
         let mut e = Vec3::ZERO;
         for light in &self.lights {
             let (to_light, distance, arriving) = match *light {
@@ -93,6 +96,7 @@ impl TracedScene {
             if cos <= 0.0 || p.geometric_normal.dot(to_light) <= 0.0 || arriving == Vec3::ZERO {
                 continue;
             }
+            *rays += 1;
             if !self.occluded(origin, to_light, distance) {
                 e += arriving * cos;
             }
@@ -103,7 +107,8 @@ impl TracedScene {
     /// Next-event estimate of the irradiance-like integral ∫ L_e(ω) ⟨ν, ω⟩ dω at `p` from
     /// one light sample (`select`, `u`), MIS-weighted against cosine sampling about ν
     /// (density `cos θ/π`): L_e ⟨ν,ω⟩ / p_l · w_l (Veach 1997, §9.2). Zero for directions
-    /// below the shading or geometric surface and for occluded samples.
+    /// below the shading or geometric surface and for occluded samples. Adds the shadow
+    /// ray to `rays`.
     #[inline]
     pub fn direct_light_sample(
         &self,
@@ -111,6 +116,7 @@ impl TracedScene {
         origin: Vec3,
         select: f32,
         u: Vec2,
+        rays: &mut u32,
     ) -> Vec3 {
         // Sampled as seen from the ray origin, so the shadow ray ends exactly on the light.
         let Some(ls) = self.light_sampler.sample(self, origin, select, u) else {
@@ -126,7 +132,11 @@ impl TracedScene {
         } else {
             f32::INFINITY
         };
-        if tmax <= 0.0 || self.occluded(origin, ls.direction, tmax) {
+        if tmax <= 0.0 {
+            return Vec3::ZERO;
+        }
+        *rays += 1;
+        if self.occluded(origin, ls.direction, tmax) {
             return Vec3::ZERO;
         }
         let weight = power_heuristic(ls.pdf, cosine_hemisphere_pdf(cos));
@@ -161,7 +171,9 @@ impl TracedScene {
         let mut pdf = direction_pdf.filter(|_| nee);
         let mut first_hit = None;
         let mut bounce = 0u32;
+        let mut rays = 0u32;
         loop {
+            rays += 1;
             let Some(hit) = self.closest_hit(o, d, f32::INFINITY) else {
                 let mut weight = 1.0;
                 if let Some(p_bsdf) = pdf {
@@ -200,12 +212,12 @@ impl TracedScene {
             let spawn = self.spawn_origin(&p);
             let reflect = throughput * albedo * core::f32::consts::FRAC_1_PI;
             if !self.lights.is_empty() {
-                radiance += reflect * self.punctual_irradiance_from(&p, spawn);
+                radiance += reflect * self.punctual_irradiance_from(&p, spawn, &mut rays);
             }
             if nee {
                 let select = rng.next_f32();
                 let u = rng.next_vec2();
-                radiance += reflect * self.direct_light_sample(&p, spawn, select, u);
+                radiance += reflect * self.direct_light_sample(&p, spawn, select, u, &mut rays);
             }
             throughput *= albedo;
             let survive = throughput.max_element().min(0.95);
@@ -226,6 +238,7 @@ impl TracedScene {
         PathSample {
             radiance,
             first_hit: first_hit.unwrap_or_default(),
+            rays,
         }
     }
 }

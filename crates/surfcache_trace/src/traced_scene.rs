@@ -10,7 +10,17 @@ use std::{ops::Range, sync::Arc};
 use surfcache_core::{
     AlphaMode, Environment, Light, Material, Scene, SceneError,
     geometry::{closest_point_barycentric, interpolate, triangle_point},
+    sampling::splitmix64,
 };
+
+/// FNV-1a hash of a name, mixed: the stable key of an instance.
+pub fn name_key(name: &str) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for b in name.bytes() {
+        h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
+    }
+    splitmix64(h)
+}
 
 /// Spawned rays start this fraction of the scene diagonal above the surface, along the
 /// geometric normal of the side they leave (self-intersection avoidance that scales with
@@ -53,11 +63,21 @@ pub struct TracedScene {
     pub has_uv1: Vec<bool>,
     /// Index into `materials` per triangle.
     pub material: Vec<u32>,
+    /// Mesh vertex index of each corner (in the corner order above).
+    pub vertex_indices: Vec<[u32; 3]>,
     /// Instance each triangle came from, and its index inside that instance's mesh.
     pub instance: Vec<u32>,
     pub local_triangle: Vec<u32>,
     /// Triangle range of each instance.
     pub instance_triangles: Vec<Range<u32>>,
+    /// Name of each instance.
+    pub instance_names: Vec<String>,
+    /// A stable 64-bit identity of each instance (a hash of its name), for keying random
+    /// streams so that results do not depend on instance order.
+    pub instance_keys: Vec<u64>,
+    /// Whether an instance's transform mirrors: its triangles' corners B and C are then
+    /// swapped relative to the mesh (to keep the front face counter-clockwise).
+    pub mirrored: Vec<bool>,
     pub materials: Vec<Arc<Material>>,
     pub lights: Vec<Light>,
     pub environment: Environment,
@@ -77,6 +97,7 @@ impl TracedScene {
             bvh: Bvh::build(&[]),
             positions: Vec::with_capacity(n),
             normals: Vec::with_capacity(n),
+            vertex_indices: Vec::with_capacity(n),
             geometric_normals: Vec::with_capacity(n),
             uv0: Vec::with_capacity(n),
             uv1: Vec::new(),
@@ -85,6 +106,9 @@ impl TracedScene {
             instance: Vec::with_capacity(n),
             local_triangle: Vec::with_capacity(n),
             instance_triangles: Vec::with_capacity(scene.instances.len()),
+            instance_names: Vec::with_capacity(scene.instances.len()),
+            instance_keys: Vec::with_capacity(scene.instances.len()),
+            mirrored: Vec::with_capacity(scene.instances.len()),
             materials: Vec::new(),
             lights: scene.lights.clone(),
             environment: scene.environment.clone(),
@@ -108,6 +132,9 @@ impl TracedScene {
             let normal_matrix = inst.transform.matrix3.inverse().transpose();
             // A mirroring transform reverses the winding; swap B and C to keep the front face.
             let mirrored = inst.transform.matrix3.determinant() < 0.0;
+            s.mirrored.push(mirrored);
+            s.instance_names.push(inst.name.clone());
+            s.instance_keys.push(name_key(&inst.name));
             let mesh = &inst.mesh;
             let start = s.positions.len() as u32;
             s.has_uv1.push(!mesh.uv1.is_empty());
@@ -123,6 +150,7 @@ impl TracedScene {
                     continue; // degenerate after transformation
                 };
                 s.positions.push(p);
+                s.vertex_indices.push(idx);
                 s.geometric_normals.push(geo);
                 s.normals.push(idx.map(|i| {
                     let n = (normal_matrix * mesh.normals[i as usize]).normalize_or(geo);
@@ -158,6 +186,13 @@ impl TracedScene {
         s.diagonal = s.bvh.scene_diagonal();
         s.light_sampler = LightSampler::new(&s);
         Ok(s)
+    }
+
+    /// A stable identity for triangle `t`: its instance's key and its index in the mesh.
+    #[inline]
+    pub fn triangle_key(&self, t: u32) -> u64 {
+        let i = self.instance[t as usize] as usize;
+        splitmix64(self.instance_keys[i] ^ self.local_triangle[t as usize] as u64)
     }
 
     /// Number of triangles traced.

@@ -1,0 +1,131 @@
+//! Surface caches: where baked irradiance lives, how it is looked up, and the textures it
+//! publishes for engines (DESIGN.md §3–4).
+//!
+//! Three caches share one interface, [`SurfaceCache`]:
+//! - [`vertex_lighting`]: E at mesh vertices, barycentric interpolation (the baseline);
+//! - [`irradiance_map`]: the thesis' per-triangle adaptive barycentric grids;
+//! - [`lightmap`]: irradiance per texel of a UV1 layout (the mesh's or a generated one).
+//!
+//! A cache is baked in *rounds*: it names the sample points it needs
+//! ([`SurfaceCache::next_round`]), the baker estimates them (in parallel, in any order,
+//! over as many frames as it likes, see [`bake`]) and hands the estimates back
+//! ([`SurfaceCache::finish_round`]); an adaptive cache then asks for more. Every point
+//! carries a stable key for its random stream, so results never depend on scheduling.
+//! Caches are plain data over the triangle arrays of a
+//! [`surfcache_trace::TracedScene`]: no ECS in here.
+
+pub mod atlas;
+pub mod rgb9e5;
+pub mod texture;
+
+use glam::Vec2;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use surfcache_trace::{Estimate, TracedScene};
+
+pub use texture::IrradianceTexture;
+
+/// Which cache to bake.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Method {
+    /// E at mesh vertices, interpolated with barycentrics.
+    Vertex,
+    /// Per-triangle adaptive irradiance maps (the thesis).
+    #[default]
+    IrradianceMap,
+    /// Texel lightmaps on TEXCOORD_1 or a generated atlas.
+    Lightmap,
+}
+
+impl Method {
+    pub const ALL: [Method; 3] = [Method::Vertex, Method::IrradianceMap, Method::Lightmap];
+
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Vertex => "vertex",
+            Method::IrradianceMap => "irradiance-map",
+            Method::Lightmap => "lightmap",
+        }
+    }
+
+    /// Parses a command-line name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+/// Where one sample of a cache is estimated.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum SampleSite {
+    /// Barycentrics `uv` of `triangle`, on its front or back side. Rays leave from
+    /// [`TracedScene::spawn_origin`], a small step inside the triangle (the leak guard).
+    Surface {
+        triangle: u32,
+        uv: Vec2,
+        front: bool,
+    },
+    /// Corner `corner` (0..3) of `triangle`, estimated at the vertex itself about its
+    /// vertex normal (flipped for the back side), rays lifted off along that normal only:
+    /// the classic vertex-lighting estimate, which sees through walls meeting the vertex.
+    Vertex {
+        triangle: u32,
+        corner: u8,
+        front: bool,
+    },
+}
+
+/// A sample a cache needs, with the key of its random stream.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SamplePoint {
+    pub site: SampleSite,
+    /// Stable identity: derive it from [`TracedScene::triangle_key`] and the sample's
+    /// position in the cache, never from its position in a round.
+    pub key: u64,
+}
+
+/// Figures every cache reports (`report.json`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CacheStats {
+    /// Points at which E was estimated.
+    pub sample_points: u64,
+    /// Hemisphere samples over all points.
+    pub samples: u64,
+    /// Most hemisphere samples at one point.
+    pub max_samples_per_point: u32,
+    /// Bytes of the cache's stored irradiance and its indexing.
+    pub cache_bytes: u64,
+    /// Mean estimated relative error C of the sample points.
+    pub mean_rel_error: f64,
+    /// Irradiance maps: number of (triangle, side) grids per final order.
+    pub order_histogram: BTreeMap<u32, u64>,
+    /// Sample points or texels found buried in other geometry (not used; filled from
+    /// valid neighbours).
+    pub buried: u64,
+    /// Texels covered by no triangle that were filled by dilation (lightmaps).
+    pub dilated_texels: u64,
+}
+
+/// What every surface cache offers (module docs).
+pub trait SurfaceCache: Send + Sync {
+    /// The method this cache implements.
+    fn method(&self) -> Method;
+
+    /// Appends the sample points of the next round to `points`; appends nothing once the
+    /// cache has converged.
+    fn next_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>);
+
+    /// Takes the estimates of the points the last [`Self::next_round`] produced, in the
+    /// same order.
+    fn finish_round(&mut self, scene: &TracedScene, points: &[SamplePoint], estimates: &[Estimate]);
+
+    /// Baked irradiance E (W/m²) at barycentrics `uv` of `triangle`, on the given side.
+    fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> glam::Vec3;
+
+    /// Sample counts, bytes and method-specific figures.
+    fn stats(&self) -> CacheStats;
+
+    /// Irradiance textures with their UV1 layout: the front side of every instance, and
+    /// the back side of instances with a double-sided material.
+    fn publish(&self, scene: &TracedScene) -> Vec<IrradianceTexture>;
+}
