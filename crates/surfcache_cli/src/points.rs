@@ -69,21 +69,10 @@ pub fn write_results(path: Option<&Path>, header: &str, rows: &[String]) -> Resu
         text.push('\n');
     }
     match path {
-        Some(path) => write_atomically(path, text.as_bytes()),
+        Some(path) => Ok(surfcache_io::write_file_atomically(path, text.as_bytes())?),
         None => std::io::stdout()
             .lock()
             .write_all(text.as_bytes())
             .context("cannot write to stdout"),
     }
-}
-
-/// Writes `bytes` to a temporary sibling of `path` and renames it into place, so a failure
-/// never leaves a half-written file under the final name.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .with_context(|| format!("'{}' is not a file path", path.display()))?;
-    let tmp = path.with_file_name(format!(".{}.tmp", name.to_string_lossy()));
-    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write '{}'", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot write '{}'", path.display()))
 }

@@ -8,7 +8,7 @@
 
 use crate::IoError;
 use crate::exr_image::write_rgb_exr;
-use crate::file_replace::replace_bytes;
+use crate::file_replace::write_file_atomically;
 use serde_json::{Value, json};
 use std::collections::HashMap;
 use std::path::Path;
@@ -330,7 +330,7 @@ pub fn write_gltf(
     let text = serde_json::to_string_pretty(&root).map_err(|e| IoError::write(path, e))?;
 
     // Companions first, the .gltf last: a .gltf on disk always has its files.
-    replace_bytes(&path.with_file_name(&bin_name), &b.bin)?;
+    write_file_atomically(&path.with_file_name(&bin_name), &b.bin)?;
     if let (Some(map), Some(uri)) = (&env.map, &env_map_uri) {
         write_rgb_exr(
             &path.with_file_name(uri),
@@ -339,5 +339,5 @@ pub fn write_gltf(
             &map.texels,
         )?;
     }
-    replace_bytes(path, text.as_bytes())
+    write_file_atomically(path, text.as_bytes())
 }

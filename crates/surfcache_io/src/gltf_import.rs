@@ -193,6 +193,15 @@ pub fn load_gltf(path: &Path) -> Result<LoadedScene, IoError> {
     // de-duplicated keeping the first occurrence.
     let mut seen_w = HashSet::new();
     report.warnings.retain(|w| seen_w.insert(w.clone()));
+    if scene.triangle_count() == 0 {
+        return Err(IoError::gltf(
+            path,
+            format!(
+                "the scene has no triangles ({} point/line primitive(s) skipped, {} degenerate triangle(s) dropped)",
+                report.skipped_primitives, report.degenerate_triangles
+            ),
+        ));
+    }
     scene.validate().map_err(|e| IoError::gltf(path, e))?;
     Ok(LoadedScene { scene, report })
 }
@@ -200,6 +209,25 @@ pub fn load_gltf(path: &Path) -> Result<LoadedScene, IoError> {
 /// Parses the JSON or GLB container (checking the GLB header first: the gltf crate
 /// underflows on a header length below 12).
 fn parse(path: &Path, bytes: &[u8]) -> Result<gltf::Gltf, IoError> {
+    if bytes.is_empty() {
+        return Err(IoError::read("glTF", path, "file is empty"));
+    }
+    // A `.glb` that is not GLB and does not look like JSON either would otherwise get a
+    // confusing JSON parser message.
+    let named_glb = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    let looks_json = bytes
+        .iter()
+        .find(|b| !b.is_ascii_whitespace())
+        .is_some_and(|&b| b == b'{' || b == 0xEF); // '{' or a UTF-8 byte-order mark
+    if named_glb && !bytes.starts_with(b"glTF") && !looks_json {
+        return Err(IoError::read(
+            "glTF",
+            path,
+            "not a GLB file (it does not start with the 'glTF' magic)",
+        ));
+    }
     if let Some(rest) = bytes.strip_prefix(b"glTF") {
         let declared = rest
             .get(4..8)

@@ -7,7 +7,9 @@
 //!   of built-in scenes;
 //! - [`write_gltf`] writes a scene (and per-instance lightmap references) back as glTF;
 //! - [`read_environment_map`], [`read_rgb_exr`] and [`write_rgb_exr`] read and write
-//!   linear-RGB OpenEXR images (equirectangular environment maps, lightmaps).
+//!   linear-RGB OpenEXR images (equirectangular environment maps, lightmaps);
+//! - [`write_file_atomically`] is the one way surfcache writes an output file: through a
+//!   temporary sibling renamed into place.
 //!
 //! Every function returns an [`IoError`] whose message is one line naming the file and the
 //! cause; no input, however malformed, makes these functions panic.
@@ -22,6 +24,7 @@ mod uri;
 
 pub use error::IoError;
 pub use exr_image::{read_environment_map, read_rgb_exr, write_rgb_exr};
+pub use file_replace::write_file_atomically;
 pub use gltf_export::{LightmapRef, write_gltf};
 pub use gltf_import::{ImportReport, LoadedScene, load_gltf};
 

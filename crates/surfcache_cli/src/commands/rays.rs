@@ -1,9 +1,6 @@
 //! `surfcache rays`: ray files for `trace` benchmarks.
 
-use crate::{
-    points::write_atomically,
-    scene_args::{EnvArgs, LoadedWorld},
-};
+use crate::scene_args::{EnvArgs, LoadedWorld};
 use anyhow::{Result, bail};
 use glam::{Vec2, Vec3};
 use std::path::PathBuf;
@@ -104,5 +101,5 @@ pub fn run(args: RaysArgs) -> Result<()> {
         }
         other => bail!("unknown ray kind '{other}' (known: surface, camera)"),
     }
-    write_atomically(&args.output, &out)
+    Ok(surfcache_io::write_file_atomically(&args.output, &out)?)
 }

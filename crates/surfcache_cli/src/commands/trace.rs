@@ -1,9 +1,6 @@
 //! `surfcache trace`: throughput benchmark and correctness oracle for the BVH.
 
-use crate::{
-    points::write_atomically,
-    scene_args::{EnvArgs, LoadedWorld, with_threads},
-};
+use crate::scene_args::{EnvArgs, LoadedWorld, with_threads};
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -87,7 +84,7 @@ pub fn run(args: TraceArgs) -> Result<()> {
     };
     if let Some(path) = &args.output {
         let out: Vec<u8> = results.iter().flat_map(|r| r.to_le_bytes()).collect();
-        write_atomically(path, &out)?;
+        surfcache_io::write_file_atomically(path, &out)?;
     }
     let rays = results.len();
     let json = serde_json::json!({
