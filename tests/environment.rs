@@ -23,7 +23,7 @@ use surfcache::core::{
     glam::{Affine3A, Vec2, Vec3},
     scenes::quad,
 };
-use surfcache::trace::{PathOptions, Query, Sampler, TracedScene, reference_irradiance};
+use surfcache::trace::{EstimatorSettings, Query, Sampler, TracedScene, reference_irradiance};
 
 const W: u32 = 512;
 const H: u32 = 256;
@@ -94,16 +94,9 @@ fn irradiance(map: &Arc<surfcache::core::EnvironmentMap>, normal: Vec3) -> (f32,
         position: Vec3::ZERO,
         normal,
     };
-    let e = reference_irradiance(
-        &traced,
-        &[q],
-        SAMPLES,
-        Sampler::Cosine,
-        3,
-        PathOptions::default(),
-        &|| {},
-    )[0]
-    .expect("the query point lies on the plane");
+    let settings = EstimatorSettings::fixed(Sampler::Best, SAMPLES, None);
+    let e = reference_irradiance(&traced, &[q], &settings, 3, &|| {})[0]
+        .expect("the query point lies on the plane");
     assert!(
         e.value.x == e.value.y && e.value.y == e.value.z,
         "grey map gave {:?}",

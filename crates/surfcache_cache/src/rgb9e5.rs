@@ -1,9 +1,10 @@
 //! Shared-exponent RGB in 32 bits (the `RGB9_E5` format of OpenGL's
 //! `EXT_texture_shared_exponent`): three 9-bit mantissas and one 5-bit exponent.
 //!
-//! Precision: every channel is stored to within half a unit of 2^(e−9), where 2^e bounds
-//! the largest channel, so each channel's error is at most 1/1024 of the largest channel
-//! (0.1 %); channels far below the largest lose relative precision. Range: 0 and
+//! Precision: every channel is stored to within half a unit of 2^(e−9), where 2^e is the
+//! smallest power of two above the largest channel, so each channel's error is at most
+//! 1/512 of the largest channel (0.2 %, typically half that); channels far below the
+//! largest lose relative precision. Range: 0 and
 //! 2⁻²⁴ … 65,408; callers scale their values into it (see [`Rgb9e5Scale`]).
 
 use glam::Vec3;
@@ -22,7 +23,7 @@ pub const RGB9E5_MAX: f32 = 511.0 / 512.0 * 65536.0;
 /// use surfcache_cache::rgb9e5::{pack, unpack};
 /// use glam::Vec3;
 /// let c = Vec3::new(3.0, 0.5, 0.125);
-/// assert!((unpack(pack(c)) - c).abs().max_element() <= 3.0 / 1024.0);
+/// assert!((unpack(pack(c)) - c).abs().max_element() <= 3.0 / 512.0);
 /// ```
 pub fn pack(c: Vec3) -> u32 {
     let clamp = |x: f32| {
@@ -104,7 +105,7 @@ mod tests {
             let f = |k: u32| ((x.rotate_left(k) & 0xFFFF) as f32 / 65536.0).powi(3) * 1000.0;
             let c = Vec3::new(f(0), f(11), f(22));
             let back = unpack(pack(c));
-            let bound = c.max_element() / 1024.0 * 1.0001 + 1e-30;
+            let bound = c.max_element() / 512.0 * 1.0001 + 1e-30;
             assert!((back - c).abs().max_element() <= bound, "{c} -> {back}");
         }
     }
@@ -121,6 +122,6 @@ mod tests {
         let s = Rgb9e5Scale::for_max(1e7);
         let v = Vec3::new(1e7, 5e6, 1.0);
         let back = s.unpack(s.pack(v));
-        assert!((back - v).abs().max_element() <= 1e7 / 1024.0);
+        assert!((back - v).abs().max_element() <= 1e7 / 512.0);
     }
 }
