@@ -15,8 +15,13 @@
 //! [`surfcache_trace::TracedScene`]: no ECS in here.
 
 pub mod atlas;
+pub mod bake;
+pub mod irradiance_map;
+pub mod lightmap;
+pub mod mesh_colour;
 pub mod rgb9e5;
 pub mod texture;
+pub mod vertex_lighting;
 
 use glam::Vec2;
 use serde::{Deserialize, Serialize};

@@ -1,0 +1,1 @@
+//! Per-triangle adaptive irradiance maps (DESIGN.md §3.2). (In progress.)

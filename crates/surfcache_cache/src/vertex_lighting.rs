@@ -1,0 +1,1 @@
+//! Vertex lighting: E at mesh vertices, barycentric interpolation (DESIGN.md §3.1). (In progress.)
