@@ -4,10 +4,7 @@
 use crate::{SamplePoint, SampleSite, SurfaceCache};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
-use surfcache_core::{
-    color::luminance,
-    sampling::{Rng, uniform_triangle},
-};
+use surfcache_core::{color::luminance, sampling::Rng};
 use surfcache_trace::{Estimate, EstimatorSettings, Sampler, SurfacePoint, TracedScene, estimate};
 
 /// The relative-error floor ε is this fraction of the scene's mean irradiance.
@@ -67,20 +64,13 @@ pub fn estimate_point(
 /// from `points` area-weighted random points with 64 samples each: the scale the
 /// relative-error floor ε follows ([`FLOOR_FRACTION`] of it).
 pub fn mean_irradiance(scene: &TracedScene, points: u32, seed: u64) -> f32 {
-    let areas: Vec<f32> = scene
-        .positions
-        .iter()
-        .map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length())
-        .collect();
-    let distribution = surfcache_core::sampling::Distribution1D::new(&areas);
+    let areas = scene.area_distribution();
     let settings = EstimatorSettings::fixed(Sampler::Best, 64, None);
     let total: f64 = (0..points)
         .into_par_iter()
         .map(|i| {
             let mut rng = Rng::new(seed ^ 0xF100_F100, i as u64);
-            let (t, _, _) = distribution.sample(rng.next_f32());
-            let uv = uniform_triangle(rng.next_vec2());
-            let p = scene.surface_point(t as u32, uv, true);
+            let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), true);
             let origin = scene.spawn_origin(&p);
             let e = estimate(scene, &p, origin, &settings, seed, u64::MAX - i as u64);
             luminance(e.value) as f64

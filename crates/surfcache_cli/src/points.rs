@@ -76,3 +76,47 @@ pub fn write_results(path: Option<&Path>, header: &str, rows: &[String]) -> Resu
             .context("cannot write to stdout"),
     }
 }
+
+/// One row of a result CSV: position, irradiance (NaN for points off the scene) and the
+/// reference's relative standard error when the file has that column.
+pub struct ResultRow {
+    pub position: Vec3,
+    pub irradiance: Vec3,
+    pub rel_std: Option<f32>,
+}
+
+/// Reads a result CSV with header `x,y,z,r,g,b` or `x,y,z,r,g,b,rel_std`.
+pub fn read_results(path: &Path) -> Result<Vec<ResultRow>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read results file '{}'", path.display()))?;
+    let mut lines = text.lines().enumerate();
+    let header = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
+    let with_std = match header {
+        "x,y,z,r,g,b" => false,
+        "x,y,z,r,g,b,rel_std" => true,
+        _ => bail!(
+            "results file '{}': header must be 'x,y,z,r,g,b[,rel_std]', found '{header}'",
+            path.display()
+        ),
+    };
+    let mut rows = Vec::new();
+    for (i, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let v: Vec<f32> = line
+            .split(',')
+            .map(|v| v.trim().parse::<f32>())
+            .collect::<Result<_, _>>()
+            .map_err(|e| anyhow::anyhow!("results file '{}' line {}: {e}", path.display(), i + 1))?;
+        if v.len() != 6 + with_std as usize {
+            bail!("results file '{}' line {}: wrong number of values", path.display(), i + 1);
+        }
+        rows.push(ResultRow {
+            position: Vec3::new(v[0], v[1], v[2]),
+            irradiance: Vec3::new(v[3], v[4], v[5]),
+            rel_std: with_std.then(|| v[6]),
+        });
+    }
+    Ok(rows)
+}

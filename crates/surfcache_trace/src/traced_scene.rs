@@ -9,8 +9,8 @@ use glam::{Vec2, Vec3};
 use std::{ops::Range, sync::Arc};
 use surfcache_core::{
     AlphaMode, Environment, Light, Material, Scene, SceneError,
-    geometry::{closest_point_barycentric, interpolate, triangle_point},
-    sampling::splitmix64,
+    geometry::{closest_point_barycentric, interpolate, triangle_area, triangle_point},
+    sampling::{Distribution1D, splitmix64, uniform_triangle},
 };
 
 /// FNV-1a hash of a name, mixed: the stable key of an instance.
@@ -193,6 +193,30 @@ impl TracedScene {
     pub fn triangle_key(&self, t: u32) -> u64 {
         let i = self.instance[t as usize] as usize;
         splitmix64(self.instance_keys[i] ^ self.local_triangle[t as usize] as u64)
+    }
+
+    /// The distribution of triangles by area, for drawing uniformly distributed surface
+    /// points with [`Self::sample_surface`].
+    pub fn area_distribution(&self) -> Distribution1D {
+        let areas: Vec<f32> = self
+            .positions
+            .iter()
+            .map(|&[a, b, c]| triangle_area(a, b, c))
+            .collect();
+        Distribution1D::new(&areas)
+    }
+
+    /// A point distributed uniformly by area over all triangles (`areas` from
+    /// [`Self::area_distribution`]; `select` picks the triangle, `u` the point in it).
+    pub fn sample_surface(
+        &self,
+        areas: &Distribution1D,
+        select: f32,
+        u: Vec2,
+        front: bool,
+    ) -> SurfacePoint {
+        let (t, _, _) = areas.sample(select);
+        self.surface_point(t as u32, uniform_triangle(u), front)
     }
 
     /// Number of triangles traced.

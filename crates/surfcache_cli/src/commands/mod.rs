@@ -1,6 +1,8 @@
 //! One module per subcommand.
 
+mod compare;
 mod export;
+mod points;
 mod rays;
 mod reference;
 mod trace;
@@ -21,6 +23,11 @@ pub enum Command {
     Rays(rays::RaysArgs),
     /// Writes a scene (e.g. a built-in one) as glTF, with its sky as OpenEXR beside it.
     Export(export::ExportArgs),
+    /// Writes random query points (x,y,z,nx,ny,nz) uniformly distributed over a scene's
+    /// surfaces.
+    Points(points::PointsArgs),
+    /// Error of a result CSV against a reference CSV (relative RMS; one JSON line).
+    Compare(compare::CompareArgs),
     /// Bakes a surface cache (not yet implemented).
     Bake(BakeArgs),
     /// Answers E(x, n) from a finished bake (not yet implemented).
@@ -72,6 +79,8 @@ pub fn run(command: Command) -> Result<()> {
         Command::Trace(args) => trace::run(args),
         Command::Rays(args) => rays::run(args),
         Command::Export(args) => export::run(args),
+        Command::Points(args) => points::run(args),
+        Command::Compare(args) => compare::run(args),
         Command::Bake(_) => {
             bail!("bake is not yet implemented (the surface caches land with the caches issue)")
         }

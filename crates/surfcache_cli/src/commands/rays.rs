@@ -6,7 +6,7 @@ use glam::{Vec2, Vec3};
 use std::path::PathBuf;
 use surfcache_core::{
     geometry::to_world,
-    sampling::{Rng, cosine_hemisphere, uniform_triangle},
+    sampling::{Rng, cosine_hemisphere},
 };
 
 #[derive(clap::Args)]
@@ -46,18 +46,10 @@ pub fn run(args: RaysArgs) -> Result<()> {
     };
     match args.kind.as_str() {
         "surface" => {
-            // Pick triangles by area through the cumulative distribution.
-            let mut cdf = Vec::with_capacity(scene.triangle_count());
-            let mut total = 0.0f64;
-            for [a, b, c] in &scene.positions {
-                total += 0.5 * (*b - *a).cross(*c - *a).length() as f64;
-                cdf.push(total);
-            }
+            let areas = scene.area_distribution();
             for _ in 0..args.count {
-                let x = rng.next_f32() as f64 * total;
-                let t = cdf.partition_point(|&c| c < x).min(cdf.len() - 1) as u32;
-                let uv = uniform_triangle(rng.next_vec2());
-                let p = scene.surface_point(t, uv, rng.next_f32() < 0.5);
+                let front = rng.next_f32() < 0.5;
+                let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), front);
                 let d = to_world(cosine_hemisphere(rng.next_vec2()), p.geometric_normal);
                 push(scene.spawn_origin(&p), d);
             }
