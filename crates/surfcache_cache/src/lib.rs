@@ -14,6 +14,7 @@
 //! Caches are plain data over the triangle arrays of a
 //! [`surfcache_trace::TracedScene`]: no ECS in here.
 
+pub mod archive;
 pub mod atlas;
 pub mod bake;
 pub mod irradiance_map;

@@ -5,6 +5,7 @@
 //! surfcache schedule (scene sync → BVH → …) and reads the results from its resources.
 //! Errors print as one line on stderr with a non-zero exit status.
 
+mod camera;
 mod commands;
 mod points;
 mod scene_args;

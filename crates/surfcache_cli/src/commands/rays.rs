@@ -1,6 +1,9 @@
 //! `surfcache rays`: ray files for `trace` benchmarks.
 
-use crate::scene_args::{EnvArgs, LoadedWorld};
+use crate::{
+    camera::Camera,
+    scene_args::{EnvArgs, LoadedWorld},
+};
 use anyhow::{Result, bail};
 use glam::{Vec2, Vec3};
 use std::path::PathBuf;
@@ -59,36 +62,15 @@ pub fn run(args: RaysArgs) -> Result<()> {
                 (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
                 |(lo, hi), p| (lo.min(*p), hi.max(*p)),
             );
-            let (eye, target) = match &args.camera {
-                Some(s) => {
-                    let v: Vec<f32> = s
-                        .split(',')
-                        .map(|x| x.trim().parse::<f32>())
-                        .collect::<Result<_, _>>()
-                        .map_err(|e| anyhow::anyhow!("--camera '{s}': {e}"))?;
-                    if v.len() != 6 || v.iter().any(|x| !x.is_finite()) {
-                        bail!("--camera needs six finite numbers ex,ey,ez,tx,ty,tz");
-                    }
-                    (Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5]))
-                }
-                None => {
-                    let c = 0.5 * (lo + hi);
-                    let eye = c - Vec3::Z * 0.45 * (hi.z - lo.z);
-                    (eye, eye + Vec3::Z)
-                }
-            };
-            let forward = (target - eye).normalize();
-            let right = forward.cross(Vec3::Y).try_normalize().unwrap_or(Vec3::X);
-            let up = right.cross(forward);
+            // Default: inside the bounds, 45 % of the depth in front of the centre.
+            let c = 0.5 * (lo + hi);
+            let eye = c - Vec3::Z * 0.45 * (hi.z - lo.z);
+            let camera = Camera::from_arg(args.camera.as_deref(), args.fov, (eye, eye + Vec3::Z))?;
             let side = (args.count as f32).sqrt().ceil() as usize;
-            let half = (args.fov.to_radians() * 0.5).tan();
             for k in 0..args.count {
                 let (i, j) = (k % side, k / side);
                 let s = (Vec2::new(i as f32, j as f32) + 0.5) / side as f32 * 2.0 - 1.0;
-                push(
-                    eye,
-                    (forward + right * s.x * half - up * s.y * half).normalize(),
-                );
+                push(camera.eye, camera.direction(s, 1.0));
             }
         }
         other => bail!("unknown ray kind '{other}' (known: surface, camera)"),
