@@ -5,8 +5,10 @@
 //! surfcache schedule (scene sync → BVH → …) and reads the results from its resources.
 //! Errors print as one line on stderr with a non-zero exit status.
 
+mod bake_dir;
 mod camera;
 mod commands;
+mod picture;
 mod points;
 mod scene_args;
 

@@ -63,6 +63,10 @@ impl EnvArgs {
 /// A scene loaded into a `bevy_ecs` world with the surfcache schedule run once.
 pub struct LoadedWorld {
     pub world: World,
+    /// The scene as loaded (environment options applied), in the world's instance order.
+    pub scene: Scene,
+    /// The scene's name (file stem or built-in name).
+    pub name: String,
 }
 
 impl LoadedWorld {
@@ -92,13 +96,14 @@ impl LoadedWorld {
         let mut schedule = Schedule::default();
         SurfcachePlugin.build(&mut world, &mut schedule);
         spawn_scene(&mut world, &scene);
+        let name = scene.name.clone();
         schedule.run(&mut world);
         world.clear_trackers();
         let resource = world.resource::<TracedSceneResource>();
         if let Some(e) = &resource.error {
             return Err(anyhow!("scene '{scene_arg}': {e}"));
         }
-        Ok(Self { world })
+        Ok(Self { world, scene, name })
     }
 
     /// The traced scene the BVH system built.

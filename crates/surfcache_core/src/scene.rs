@@ -167,6 +167,28 @@ impl Mesh {
         before - self.indices.len()
     }
 
+    /// The mesh with one vertex per triangle corner and the given TEXCOORD_1 per corner
+    /// (`uv1[t]` for triangle `t`): the vertex split a generated lightmap layout needs,
+    /// where neighbouring triangles no longer share UV1 coordinates.
+    pub fn with_corner_uv1(&self, uv1: &[[Vec2; 3]]) -> Mesh {
+        let n = self.indices.len();
+        let corners = || self.indices.iter().flatten().map(|&i| i as usize);
+        Mesh {
+            name: self.name.clone(),
+            positions: corners().map(|i| self.positions[i]).collect(),
+            normals: corners().map(|i| self.normals[i]).collect(),
+            uv0: if self.uv0.is_empty() {
+                Vec::new()
+            } else {
+                corners().map(|i| self.uv0[i]).collect()
+            },
+            uv1: (0..n)
+                .flat_map(|t| uv1.get(t).copied().unwrap_or([Vec2::ZERO; 3]))
+                .collect(),
+            indices: (0..n as u32).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect(),
+        }
+    }
+
     /// Corner positions of triangle `t`.
     #[inline]
     pub fn triangle(&self, t: usize) -> [Vec3; 3] {

@@ -1,8 +1,10 @@
 //! One module per subcommand.
 
+mod bake;
 mod compare;
 mod export;
 mod points;
+mod query;
 mod rays;
 mod reference;
 mod trace;
@@ -28,49 +30,13 @@ pub enum Command {
     Points(points::PointsArgs),
     /// Error of a result CSV against a reference CSV (relative RMS; one JSON line).
     Compare(compare::CompareArgs),
-    /// Bakes a surface cache (not yet implemented).
-    Bake(BakeArgs),
-    /// Answers E(x, n) from a finished bake (not yet implemented).
-    Query(QueryArgs),
-}
-
-/// `surfcache bake` options (CONTRACT.md).
-#[derive(clap::Args)]
-pub struct BakeArgs {
-    /// A .gltf/.glb file or a built-in scene name (cornell).
-    scene: String,
-    #[command(flatten)]
-    env: EnvArgs,
-    /// vertex, irradiance-map or lightmap.
-    #[arg(long)]
-    method: Option<String>,
-    /// Relative error bound of one surface estimate.
-    #[arg(long, default_value_t = 0.01)]
-    max_rel_error: f32,
-    #[arg(long)]
-    min_samples: Option<u32>,
-    #[arg(long)]
-    max_samples: Option<u32>,
-    /// Maximum number of indirect bounces [default: unlimited, Russian roulette].
-    #[arg(long)]
-    bounces: Option<u32>,
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Worker threads [default: all cores].
-    #[arg(long)]
-    threads: Option<usize>,
-    /// Output directory.
-    #[arg(short = 'o', long = "out")]
-    out: PathBuf,
-}
-
-/// `surfcache query` options (CONTRACT.md).
-#[derive(clap::Args)]
-pub struct QueryArgs {
-    out_dir: PathBuf,
-    points: PathBuf,
-    #[arg(short = 'o', long = "out")]
-    output: Option<PathBuf>,
+    /// Bakes a surface cache (vertex lighting, irradiance maps or texel lightmaps) into an
+    /// output directory: report.json, cache.bin, lightmaps/*.exr, scene.gltf with UV1.
+    Bake(bake::BakeArgs),
+    /// Answers E(x, n) at query points from a finished bake, without re-baking.
+    Query(query::QueryArgs),
+    /// Renders a camera view shaded from a bake, path-traced, or as a diagnostic picture.
+    Render(render::RenderArgs),
 }
 
 pub fn run(command: Command) -> Result<()> {
@@ -81,11 +47,8 @@ pub fn run(command: Command) -> Result<()> {
         Command::Export(args) => export::run(args),
         Command::Points(args) => points::run(args),
         Command::Compare(args) => compare::run(args),
-        Command::Bake(_) => {
-            bail!("bake is not yet implemented (the surface caches land with the caches issue)")
-        }
-        Command::Query(_) => {
-            bail!("query is not yet implemented (the surface caches land with the caches issue)")
-        }
+        Command::Bake(args) => bake::run(args),
+        Command::Query(args) => query::run(args),
+        Command::Render(args) => render::run(args),
     }
 }

@@ -1,0 +1,225 @@
+//! `surfcache bake`: bakes a surface cache and writes it, its textures, the scene with
+//! UV1 and a report into an output directory (CONTRACT.md).
+
+use crate::{
+    bake_dir::{self, StagingDir},
+    scene_args::{EnvArgs, LoadedWorld, with_threads},
+};
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+use std::{
+    path::PathBuf,
+    sync::{
+        Arc,
+        atomic::{AtomicBool, Ordering},
+    },
+    time::Instant,
+};
+use surfcache_cache::{
+    Cache, CacheSettings, Method, SurfaceCache,
+    archive::BakeArchive,
+    bake::{Baker, FLOOR_FRACTION, mean_irradiance},
+};
+use surfcache_trace::{EstimatorSettings, Sampler};
+
+/// `surfcache bake` options (CONTRACT.md, plus the project's own).
+#[derive(clap::Args)]
+pub struct BakeArgs {
+    /// A .gltf/.glb file or a built-in scene name (cornell).
+    scene: String,
+    #[command(flatten)]
+    env: EnvArgs,
+    /// vertex, irradiance-map (per-triangle adaptive, the thesis) or lightmap (texels)
+    /// [default: irradiance-map].
+    #[arg(long)]
+    method: Option<String>,
+    /// Relative error bound of one surface estimate: sampling stops once the standard error
+    /// of the mean is at most this fraction of E + ε (ε: 1 % of the scene's mean
+    /// irradiance).
+    #[arg(long, default_value_t = 0.01)]
+    max_rel_error: f32,
+    /// Fewest hemisphere samples per estimate [default: 256].
+    #[arg(long)]
+    min_samples: Option<u32>,
+    /// Most hemisphere samples per estimate [default: 65536].
+    #[arg(long)]
+    max_samples: Option<u32>,
+    /// Maximum number of indirect bounces [default: unlimited, Russian roulette].
+    #[arg(long)]
+    bounces: Option<u32>,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Hemisphere sampler: uniform (the thesis), cosine, qmc, mis, best.
+    #[arg(long, default_value = "best")]
+    sampler: String,
+    /// Irradiance maps: samples per metre that set each triangle's highest order;
+    /// lightmaps: texels per metre [default: the method's own].
+    #[arg(long)]
+    density: Option<f32>,
+    /// Irradiance maps: refinement stops when new samples differ from the coarser
+    /// interpolation by at most this relative error [default: the method's own].
+    #[arg(long)]
+    interpolation_error: Option<f32>,
+    /// Which sides of the surfaces to bake: both, or front (counter-clockwise) only.
+    #[arg(long, default_value = "both")]
+    sides: String,
+    /// Output directory (created; replaced if it holds an earlier bake).
+    #[arg(short = 'o', long = "out")]
+    out: PathBuf,
+}
+
+pub fn run(args: BakeArgs) -> Result<()> {
+    let method = match &args.method {
+        None => Method::default(),
+        Some(m) => Method::from_name(m).with_context(|| {
+            let known: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+            format!("unknown method '{m}' (known: {})", known.join(", "))
+        })?,
+    };
+    let Some(sampler) = Sampler::from_name(&args.sampler) else {
+        let known: Vec<&str> = Sampler::ALL.iter().map(|s| s.name()).collect();
+        bail!("unknown sampler '{}' (known: {})", args.sampler, known.join(", "));
+    };
+    if !(args.max_rel_error.is_finite() && args.max_rel_error > 0.0) {
+        bail!("--max-rel-error must be a positive number");
+    }
+    let defaults = EstimatorSettings::default();
+    let min_samples = args.min_samples.unwrap_or(defaults.min_samples);
+    let max_samples = args.max_samples.unwrap_or(defaults.max_samples.max(min_samples));
+    if min_samples == 0 || max_samples < min_samples {
+        bail!("need 1 ≤ --min-samples ≤ --max-samples (got {min_samples} and {max_samples})");
+    }
+    let both_sides = match args.sides.as_str() {
+        "both" => true,
+        "front" => false,
+        other => bail!("unknown --sides '{other}' (known: both, front)"),
+    };
+    let mut cache_settings = CacheSettings::for_method(method);
+    cache_settings.both_sides = both_sides;
+    if let Some(d) = args.density {
+        if !(d.is_finite() && d > 0.0) {
+            bail!("--density must be a positive number");
+        }
+        cache_settings.density = d;
+    }
+    if let Some(e) = args.interpolation_error {
+        if !(e.is_finite() && e > 0.0) {
+            bail!("--interpolation-error must be a positive number");
+        }
+        cache_settings.interpolation_error = e;
+    }
+    let staging = StagingDir::create(&args.out)?;
+
+    let loaded = LoadedWorld::load(&args.scene, &args.env)?;
+    let scene = loaded.traced()?;
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let cancel = cancel.clone();
+        // A second handler cannot be installed (e.g. in tests); cancelling then falls back
+        // to the default signal behaviour, which still leaves only the staging directory.
+        let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::SeqCst));
+    }
+    let threads = args.threads;
+    let start = Instant::now();
+    let (cache, progress, floor, mean) = with_threads(threads, || -> Result<_> {
+        let mean = mean_irradiance(&scene, 512, args.seed);
+        let floor = (FLOOR_FRACTION * mean).max(f32::MIN_POSITIVE);
+        let settings = EstimatorSettings {
+            sampler,
+            max_rel_error: args.max_rel_error,
+            min_samples,
+            max_samples,
+            floor,
+            max_bounces: args.bounces,
+        };
+        cache_settings.floor = floor;
+        let cache = Cache::new(&scene, method, &cache_settings);
+        let bar = ProgressBar::new_spinner().with_style(
+            ProgressStyle::with_template(
+                "bake {spinner} round {msg} [{elapsed_precise}]",
+            )
+            .expect("static template"),
+        );
+        let mut baker = Baker::new(cache, settings, args.seed);
+        let step_start = Instant::now();
+        while !baker.step(&scene, 1024) {
+            if cancel.load(Ordering::SeqCst) {
+                bar.finish_and_clear();
+                bail!("interrupted: nothing was written to '{}'", args.out.display());
+            }
+            let p = baker.progress();
+            let secs = step_start.elapsed().as_secs_f64().max(1e-9);
+            bar.set_message(format!(
+                "{}: {} points done, {} pending, {:.1} Mrays/s",
+                p.rounds + 1,
+                p.points_done,
+                p.points_pending,
+                p.rays as f64 / secs / 1e6
+            ));
+            bar.tick();
+        }
+        bar.finish_and_clear();
+        let progress = *baker.progress();
+        Ok((baker.into_cache(), progress, floor, mean))
+    })??;
+    let bake_seconds = start.elapsed().as_secs_f64();
+    let stats = cache.stats();
+
+    // Outputs: archive for `query`, textures, the scene with UV1, the report.
+    let textures = cache.publish(&scene);
+    let lightmaps = bake_dir::write_lightmaps(&staging, &loaded, &scene, &textures)?;
+    let archive = BakeArchive::new(&scene, cache);
+    staging.write("cache.bin", &archive.to_bytes())?;
+    let report = json!({
+        "scene": loaded.name,
+        "method": method.name(),
+        "triangles": scene.triangle_count(),
+        "sample_points": stats.sample_points,
+        "rays_traced": progress.rays,
+        "bake_seconds": bake_seconds,
+        "cache_bytes": stats.cache_bytes,
+        "samples": stats.samples,
+        "mean_samples_per_point": stats.samples as f64 / stats.sample_points.max(1) as f64,
+        "max_samples_per_point": stats.max_samples_per_point,
+        "mean_rel_error": stats.mean_rel_error,
+        "order_histogram": stats.order_histogram,
+        "buried": stats.buried,
+        "dilated_texels": stats.dilated_texels,
+        "rounds": progress.rounds,
+        "scene_mean_irradiance": mean,
+        "relative_error_floor": floor,
+        "lightmaps": lightmaps,
+        "settings": {
+            "scene": args.scene,
+            "env": args.env.env.as_ref().map(|p| p.display().to_string()),
+            "env_color": args.env.env_color.map(|c| c.to_array()),
+            "env_intensity": args.env.env_intensity,
+            "method": method.name(),
+            "max_rel_error": args.max_rel_error,
+            "min_samples": min_samples,
+            "max_samples": max_samples,
+            "bounces": args.bounces,
+            "seed": args.seed,
+            "threads": threads.unwrap_or_else(rayon::current_num_threads),
+            "sampler": sampler.name(),
+            "sides": args.sides,
+            "cache": cache_settings,
+        },
+    });
+    staging.write("report.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
+    staging.commit()?;
+    eprintln!(
+        "baked {} ({}) in {:.1} s: {} sample points, {} bytes -> {}",
+        loaded.name,
+        method.name(),
+        bake_seconds,
+        stats.sample_points,
+        stats.cache_bytes,
+        args.out.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,62 @@
+//! `surfcache query`: baked irradiance E(x, n) at query points, from a bake directory
+//! alone (CONTRACT.md).
+
+use crate::{
+    bake_dir::read_archive,
+    points::{read_points, write_results},
+};
+use anyhow::{Context, Result};
+use rayon::prelude::*;
+use std::path::PathBuf;
+use surfcache_cache::SurfaceCache;
+
+/// `surfcache query` options (CONTRACT.md).
+#[derive(clap::Args)]
+pub struct QueryArgs {
+    /// A directory written by `surfcache bake`.
+    out_dir: PathBuf,
+    /// CSV with header x,y,z,nx,ny,nz: points on surfaces (metres) and the unit normal of
+    /// the side asked about.
+    points: PathBuf,
+    /// Output CSV x,y,z,r,g,b (W/m²) [default: stdout].
+    #[arg(short = 'o', long = "out")]
+    output: Option<PathBuf>,
+}
+
+pub fn run(args: QueryArgs) -> Result<()> {
+    let queries = read_points(&args.points)?;
+    let archive = read_archive(&args.out_dir)?;
+    let geometry = archive
+        .geometry()
+        .with_context(|| format!("'{}'", args.out_dir.display()))?;
+    let cache = &archive.cache;
+    let values: Vec<Option<glam::Vec3>> = queries
+        .par_iter()
+        .map(|q| {
+            let p = geometry.locate(q.position, q.normal)?;
+            let front = geometry.geometric_normals[p.triangle as usize].dot(p.geometric_normal) > 0.0;
+            Some(cache.lookup(p.triangle, p.uv, front))
+        })
+        .collect();
+    let mut off_surface = 0;
+    let rows: Vec<String> = queries
+        .iter()
+        .zip(&values)
+        .map(|(q, v)| {
+            let p = q.position;
+            match v {
+                Some(e) => format!("{},{},{},{},{},{}", p.x, p.y, p.z, e.x, e.y, e.z),
+                None => {
+                    off_surface += 1;
+                    format!("{},{},{},nan,nan,nan", p.x, p.y, p.z)
+                }
+            }
+        })
+        .collect();
+    if off_surface > 0 {
+        eprintln!(
+            "warning: {off_surface} point(s) lie farther than 1e-4 of the scene diagonal from every surface: nan"
+        );
+    }
+    write_results(args.output.as_deref(), "x,y,z,r,g,b", &rows)
+}

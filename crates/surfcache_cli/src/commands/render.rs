@@ -1,0 +1,184 @@
+//! `surfcache render`: a camera view shaded from a bake (L = L_e + ρ/π · E), path-traced
+//! for comparison, or the thesis' diagnostic pictures (samples per point, irradiance-map
+//! order per triangle).
+
+use crate::{
+    bake_dir::read_archive,
+    camera::{Camera, default_view},
+    picture::{auto_exposure, heat, write_png},
+    scene_args::{EnvArgs, LoadedWorld, with_threads},
+};
+use anyhow::{Result, bail};
+use glam::{Vec2, Vec3};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use std::path::PathBuf;
+use surfcache_cache::SurfaceCache;
+use surfcache_trace::{EstimatorSettings, Sampler, estimate};
+
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// A .gltf/.glb file or a built-in scene name (cornell): the scene that was baked.
+    scene: String,
+    #[command(flatten)]
+    env: EnvArgs,
+    /// Shade from this bake directory.
+    #[arg(long, value_name = "OUT_DIR")]
+    cache: Option<PathBuf>,
+    /// Instead, path-trace E at every visible point with this many samples.
+    #[arg(long, value_name = "N")]
+    reference: Option<u32>,
+    /// With --cache: a diagnostic picture instead of shading: `samples` (hemisphere
+    /// samples of the nearest sample point, log scale) or `order` (irradiance-map order).
+    #[arg(long)]
+    show: Option<String>,
+    /// Camera eye and target `ex,ey,ez,tx,ty,tz` [default: in front of the scene's
+    /// bounding box, looking along +Z].
+    #[arg(long, value_name = "EX,EY,EZ,TX,TY,TZ")]
+    camera: Option<String>,
+    /// Vertical field of view in degrees.
+    #[arg(long, default_value_t = 40.0)]
+    fov: f32,
+    /// Image size WxH in pixels.
+    #[arg(long, default_value = "512x512")]
+    size: String,
+    /// Exposure multiplier before tone mapping [default: automatic].
+    #[arg(long)]
+    exposure: Option<f32>,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Output PNG (tone-mapped sRGB); the linear radiance is written beside it as .exr.
+    #[arg(short = 'o', long = "out")]
+    output: PathBuf,
+}
+
+/// Sub-pixel samples per axis (a fixed 2×2 grid: deterministic anti-aliasing).
+const SUBPIXELS: u32 = 2;
+
+pub fn run(args: RenderArgs) -> Result<()> {
+    let (width, height) = parse_size(&args.size)?;
+    if args.cache.is_some() == args.reference.is_some() {
+        bail!("give exactly one of --cache OUT_DIR and --reference N");
+    }
+    if args.show.is_some() && args.cache.is_none() {
+        bail!("--show needs --cache");
+    }
+    if let Some(show) = &args.show
+        && show != "samples"
+        && show != "order"
+    {
+        bail!("unknown --show '{show}' (known: samples, order)");
+    }
+    let loaded = LoadedWorld::load(&args.scene, &args.env)?;
+    let scene = loaded.traced()?;
+    let archive = match &args.cache {
+        Some(dir) => {
+            let archive = read_archive(dir)?;
+            if archive.positions != scene.positions {
+                bail!(
+                    "the bake in '{}' was made from a different scene than '{}'",
+                    dir.display(),
+                    args.scene
+                );
+            }
+            Some(archive)
+        }
+        None => None,
+    };
+    let (lo, hi) = scene
+        .positions
+        .iter()
+        .flatten()
+        .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), p| {
+            (lo.min(*p), hi.max(*p))
+        });
+    let camera = Camera::from_arg(args.camera.as_deref(), args.fov, default_view(lo, hi, args.fov))?;
+    let aspect = width as f32 / height as f32;
+    let reference = args.reference.map(|n| EstimatorSettings::fixed(Sampler::Best, n, None));
+    let show = args.show.as_deref();
+    let bar = ProgressBar::new(height as u64).with_style(
+        ProgressStyle::with_template("render {bar:40} {pos}/{len} rows, eta {eta}")
+            .expect("static template"),
+    );
+    let pixels: Vec<Vec3> = with_threads(args.threads, || {
+        (0..height)
+            .into_par_iter()
+            .flat_map_iter(|y| {
+                let row: Vec<Vec3> = (0..width)
+                    .map(|x| {
+                        let mut sum = Vec3::ZERO;
+                        for s in 0..SUBPIXELS * SUBPIXELS {
+                            let sub = Vec2::new((s % SUBPIXELS) as f32, (s / SUBPIXELS) as f32);
+                            let px = Vec2::new(x as f32, y as f32)
+                                + (sub + 0.5) / SUBPIXELS as f32;
+                            let ndc = px / Vec2::new(width as f32, height as f32) * 2.0 - 1.0;
+                            let d = camera.direction(ndc, aspect);
+                            let Some(hit) = scene.closest_hit(camera.eye, d, f32::INFINITY) else {
+                                if show.is_none() {
+                                    sum += scene.environment.radiance(d);
+                                }
+                                continue;
+                            };
+                            let p = scene.hit_point(&hit, d);
+                            let front =
+                                scene.geometric_normals[hit.triangle as usize].dot(d) < 0.0;
+                            if let (Some(kind), Some(a)) = (show, &archive) {
+                                let diag = a.cache.diagnostic(hit.triangle, hit.uv, front);
+                                sum += match kind {
+                                    "order" => match diag.order {
+                                        Some(o) => heat((o.max(1) as f32).log2() / 7.0),
+                                        None => Vec3::splat(0.2),
+                                    },
+                                    _ => heat((diag.samples.max(1) as f32).log2() / 18.0),
+                                };
+                                continue;
+                            }
+                            let material = scene.material_of(hit.triangle);
+                            let uv0 = scene.uv0_at(hit.triangle, hit.uv);
+                            let e = match (&archive, &reference) {
+                                (Some(a), _) => a.cache.lookup(hit.triangle, hit.uv, front),
+                                (None, Some(settings)) => {
+                                    let origin = scene.spawn_origin(&p);
+                                    let key = ((y * width + x) * SUBPIXELS * SUBPIXELS + s) as u64;
+                                    estimate(&scene, &p, origin, settings, args.seed, key).value
+                                }
+                                (None, None) => Vec3::ZERO,
+                            };
+                            sum += material.emission_at(uv0, front)
+                                + material.albedo_at(uv0) * core::f32::consts::FRAC_1_PI * e;
+                        }
+                        sum / (SUBPIXELS * SUBPIXELS) as f32
+                    })
+                    .collect();
+                bar.inc(1);
+                row
+            })
+            .collect()
+    })?;
+    bar.finish_and_clear();
+    let exposure = match (args.exposure, show) {
+        (_, Some(_)) => 1.0,
+        (Some(e), None) => e,
+        (None, None) => auto_exposure(&pixels),
+    };
+    write_png(&args.output, width, height, &pixels, exposure)?;
+    if show.is_none() {
+        let exr = args.output.with_extension("exr");
+        surfcache_io::write_rgb_exr(&exr, width, height, &pixels)?;
+    }
+    eprintln!("wrote {} (exposure {exposure:.3})", args.output.display());
+    Ok(())
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32)> {
+    let parsed = s
+        .split_once(['x', 'X'])
+        .and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)));
+    match parsed {
+        Some((w, h)) if (1..=16384).contains(&w) && (1..=16384).contains(&h) => Ok((w, h)),
+        _ => bail!("--size must be WxH with each side between 1 and 16384, got '{s}'"),
+    }
+}
