@@ -7,12 +7,11 @@ mod points;
 mod query;
 mod rays;
 mod reference;
+mod render;
 mod trace;
 
-use crate::scene_args::EnvArgs;
-use anyhow::{Result, bail};
+use anyhow::Result;
 use clap::Subcommand;
-use std::path::PathBuf;
 
 #[derive(Subcommand)]
 pub enum Command {
