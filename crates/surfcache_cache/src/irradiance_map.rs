@@ -1,1 +1,663 @@
-//! Per-triangle adaptive irradiance maps (DESIGN.md §3.2). (In progress.)
+//! Per-triangle adaptive irradiance maps (DESIGN.md §3.2), the thesis' surface cache.
+//!
+//! Every (triangle, side) owns a barycentric grid of order `n` (a power of two): samples
+//! E(i, j) at index coordinates `i + j ≤ n`, position φ(i/n, j/n), `s(n) = (n+1)(n+2)/2`
+//! of them ([`grid_size`]) stored at `m(i, j) = (i+j)(i+j+1)/2 + j` ([`grid_index`]).
+//! Lookup interpolates linearly inside the grid cell that holds `(u, v)`
+//! ([`grid_interpolate`]) and never crosses into another triangle.
+//!
+//! **Generator.** Round 0 asks for every grid at order 2. After each round, every grid
+//! that just doubled compares each *new* sample (one with an odd index coordinate) with
+//! the linear interpolation of the coarse grid there: the mean of the two coarse samples
+//! at the ends of the coarse edge it halves ([`coarse_neighbours`]). It doubles again
+//! while the largest difference exceeds
+//! [`IrradianceMapSettings::interpolation_error`] and its order is below its maximum
+//! `n_max = clamp(next_pow2(ceil(longest edge · density)), 2, max_order)`
+//! ([`IrradianceMapSettings::max_order_for`]). Doubling keeps every sample ((i, j) of
+//! order n is (2i, 2j) of order 2n); only the new ones are estimated.
+//!
+//! **Noise rule.** Estimates are noisy, and a plain test would keep refining noise. Only
+//! the part of a difference that exceeds `k` combined standard errors counts:
+//! `e = max_c max(0, |ΔE_c| − k·σ_c) / (E_new,c + ε)` with
+//! `ΔE = E_new − (E_a + E_b)/2`, `σ² = se_new² + (se_a² + se_b²)/4` (per channel `c`),
+//! `k =` [`IrradianceMapSettings::noise_sigmas`] (default 3) and ε the estimator's floor
+//! ([`IrradianceMapSettings::floor`]). A grid refines when the largest `e` over its new
+//! samples exceeds the bound. Pure noise then passes with near certainty (it would need
+//! `|ΔE| > kσ + bound·(E + ε)`), while a real change of E between neighbours triggers
+//! refinement once it stands out of the noise by the bound.
+//!
+//! **Keys.** A sample's random stream is keyed by ([`TracedScene::triangle_key`], side,
+//! position on a fixed grid of [`KEY_RESOLUTION`]), see [`sample_key`]: the same point
+//! gets the same estimate whichever round or order introduced it, so results do not
+//! depend on scheduling.
+//!
+//! **Buried samples.** An estimate whose `back_face_share` exceeds
+//! [`IrradianceMapSettings::buried_threshold`] lies inside other geometry (a floor under
+//! a box). Its value is replaced by the mean of its non-buried grid neighbours, ring by
+//! ring from the valid ones ([`IrradianceMaps`] keeps the raw estimates while baking and
+//! refills after each round); a grid that is buried everywhere keeps its raw values.
+//! Buried samples are left out of the refinement test as new samples (their filled values
+//! are used as coarse neighbours). They are counted in [`CacheStats::buried`].
+//!
+//! **Storage.** Samples are RGB9E5 (4 bytes, [`Rgb9e5Scale`] chosen from the largest
+//! stored value), grid by grid; a grid slot `2·triangle + side` (side 0 = front) has a
+//! `u32` offset and a `u8` log2 order (0 = not baked). `cache_bytes = 4·samples +
+//! 5·grid slots + 4` (the last 4: the scale). Estimates' f32 values, standard errors and
+//! burial flags live only while baking.
+//!
+//! ```
+//! use surfcache_cache::{SurfaceCache, bake::bake_to_convergence};
+//! use surfcache_cache::irradiance_map::{IrradianceMapSettings, IrradianceMaps};
+//! use surfcache_core::{Environment, Instance, Material, Scene, glam::*, scenes::quad};
+//! use surfcache_trace::{EstimatorSettings, Sampler, TracedScene};
+//! use std::sync::Arc;
+//! // A square under a uniform sky of radiance 1: E = π everywhere.
+//! let v = Vec3::new;
+//! let mesh = quad("floor", [v(0., 0., 0.), v(1., 0., 0.), v(1., 0., 1.), v(0., 0., 1.)], Vec3::Y);
+//! let scene = Scene {
+//!     instances: vec![Instance {
+//!         name: "floor".into(),
+//!         mesh: Arc::new(mesh),
+//!         material: Arc::new(Material::diffuse("white", Vec3::splat(0.8))),
+//!         transform: Affine3A::IDENTITY,
+//!     }],
+//!     environment: Environment::uniform(Vec3::ONE),
+//!     ..Default::default()
+//! };
+//! let traced = TracedScene::new(&scene).unwrap();
+//! let maps = IrradianceMaps::new(&traced, IrradianceMapSettings::default());
+//! let estimator = EstimatorSettings::fixed(Sampler::Best, 64, None);
+//! let maps = bake_to_convergence(&traced, maps, &estimator, 0);
+//! let e = maps.lookup(0, Vec2::new(0.2, 0.3), true);
+//! assert!((e - Vec3::splat(std::f32::consts::PI)).abs().max_element() < 0.02);
+//! assert_eq!(maps.stats().order_histogram[&2], 4); // 2 triangles × 2 sides, flat E
+//! ```
+
+use crate::{
+    CacheStats, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache, mesh_colour,
+    rgb9e5::Rgb9e5Scale,
+};
+use glam::{Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use surfcache_core::sampling::splitmix64;
+use surfcache_trace::{Estimate, TracedScene};
+
+/// Sample keys locate a sample on a grid of this order ([`sample_key`]); grid orders are
+/// at most [`MAX_ORDER_LIMIT`].
+pub const KEY_RESOLUTION: u32 = 1 << 16;
+
+/// The largest order a grid may have.
+pub const MAX_ORDER_LIMIT: u32 = 1 << 15;
+
+/// s(n) = (n+1)(n+2)/2: the number of samples of an order-`n` grid.
+#[inline]
+pub const fn grid_size(n: u32) -> usize {
+    let n = n as usize;
+    (n + 1) * (n + 2) / 2
+}
+
+/// m(i, j) = (i+j)(i+j+1)/2 + j: where sample (i, j) is stored (DESIGN.md §3.2). Samples
+/// are stored diagonal by diagonal (`d = i + j`), so the index does not depend on the
+/// order and the samples of an order-`n` grid occupy `0..s(n)`.
+#[inline]
+pub const fn grid_index(i: u32, j: u32) -> usize {
+    let (i, j) = (i as usize, j as usize);
+    (i + j) * (i + j + 1) / 2 + j
+}
+
+/// The index coordinates of the coarse samples at the ends of the coarse edge halved by
+/// the new sample `(i, j)` (at least one coordinate odd) of a grid that just doubled:
+/// `(i∓1, j)` on rows, `(i, j∓1)` on columns and `(i+1, j−1), (i−1, j+1)` on the
+/// diagonals (the hypotenuses of the coarse cells).
+#[inline]
+pub const fn coarse_neighbours(i: u32, j: u32) -> [[u32; 2]; 2] {
+    match (i % 2 == 1, j % 2 == 1) {
+        (true, false) => [[i - 1, j], [i + 1, j]],
+        (false, true) => [[i, j - 1], [i, j + 1]],
+        _ => [[i + 1, j - 1], [i - 1, j + 1]],
+    }
+}
+
+/// Linear interpolation of an order-`n` grid with samples `grid(i, j)` at barycentrics
+/// `uv` (clamped into the triangle): in the cell `(i, j)` holding `(u·n, v·n)` with
+/// fractions `(fx, fy)`, the lower triangle (i,j),(i+1,j),(i,j+1) gives
+/// `(1−fx−fy)E(i,j) + fx E(i+1,j) + fy E(i,j+1)` for `fx + fy ≤ 1`, the upper one
+/// (i+1,j),(i,j+1),(i+1,j+1) gives `(1−fy)E(i+1,j) + (1−fx)E(i,j+1) + (fx+fy−1)E(i+1,j+1)`.
+#[inline]
+pub fn grid_interpolate(n: u32, uv: Vec2, grid: impl Fn(u32, u32) -> Vec3) -> Vec3 {
+    let mut uv = uv.max(Vec2::ZERO);
+    let sum = uv.x + uv.y;
+    if sum > 1.0 {
+        uv /= sum;
+    }
+    let nf = n as f32;
+    let (x, y) = (uv.x * nf, uv.y * nf);
+    let i = (x.floor() as u32).min(n - 1);
+    let j = (y.floor() as u32).min(n - 1 - i);
+    let (fx, fy) = (x - i as f32, y - j as f32);
+    if fx + fy <= 1.0 || i + j + 2 > n {
+        grid(i, j) * (1.0 - fx - fy) + grid(i + 1, j) * fx + grid(i, j + 1) * fy
+    } else {
+        grid(i + 1, j) * (1.0 - fy)
+            + grid(i, j + 1) * (1.0 - fx)
+            + grid(i + 1, j + 1) * (fx + fy - 1.0)
+    }
+}
+
+/// The random-stream key of sample `(i, j)` of the order-`n` grid on one side of the
+/// triangle with key `triangle_key`: a hash of the key, the side and the sample's
+/// position `(i, j)·KEY_RESOLUTION/n` on the finest grid, so that `(i, j)` of order `n`
+/// and `(2i, 2j)` of order `2n` share a key.
+#[inline]
+pub fn sample_key(triangle_key: u64, front: bool, i: u32, j: u32, n: u32) -> u64 {
+    let step = (KEY_RESOLUTION / n) as u64;
+    let (x, y) = (i as u64 * step, j as u64 * step);
+    let position = ((!front) as u64) << 42 | x << 21 | y;
+    splitmix64(triangle_key ^ splitmix64(position ^ 0x1aa4_0000_0000_0000))
+}
+
+/// Visits the samples of an order-`n` grid that an order-`n/2` grid lacks (all of them
+/// when `coarse` is 0: a fresh grid), in storage order: `f(i, j, m)`.
+#[inline]
+fn for_each_new_sample(coarse: u32, n: u32, mut f: impl FnMut(u32, u32, usize)) {
+    for d in 0..=n {
+        for j in 0..=d {
+            let i = d - j;
+            if coarse == 0 || i % 2 == 1 || j % 2 == 1 {
+                f(i, j, grid_index(i, j));
+            }
+        }
+    }
+}
+
+/// How irradiance maps refine and what they store.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IrradianceMapSettings {
+    /// Bound on the interpolation error e of new samples; a grid stops refining below it
+    /// (the thesis used 2.5–10 %). Default 0.05.
+    pub interpolation_error: f32,
+    /// Target samples per metre along a triangle's longest edge: sets each grid's maximum
+    /// order, so equal-sized features get equal resolution. Default 32.
+    pub density: f32,
+    /// Cap on every grid's order (rounded down to a power of two, in 2..=[`MAX_ORDER_LIMIT`]).
+    /// Default 64.
+    pub max_order: u32,
+    /// Bake the back side of every triangle (true), or only of triangles whose material
+    /// is double-sided (the back sides [`SurfaceCache::publish`] needs). Lookups on a side
+    /// that was not baked return zero. Default true.
+    pub both_sides: bool,
+    /// An estimate whose `back_face_share` exceeds this is buried (module docs).
+    /// Default 0.5.
+    pub buried_threshold: f32,
+    /// k: how many combined standard errors of a difference are noise (module docs).
+    /// Default 3.
+    pub noise_sigmas: f32,
+    /// ε (W/m²) of the relative interpolation error; use the estimator's floor
+    /// ([`surfcache_trace::EstimatorSettings::floor`]). Default 0.
+    pub floor: f32,
+}
+
+impl Default for IrradianceMapSettings {
+    fn default() -> Self {
+        Self {
+            interpolation_error: 0.05,
+            density: 32.0,
+            max_order: 64,
+            both_sides: true,
+            buried_threshold: 0.5,
+            noise_sigmas: 3.0,
+            floor: 0.0,
+        }
+    }
+}
+
+impl IrradianceMapSettings {
+    /// The cap on orders actually used: `max_order` rounded down to a power of two and
+    /// clamped to 2..=[`MAX_ORDER_LIMIT`].
+    pub fn order_cap(&self) -> u32 {
+        let m = self.max_order.clamp(2, MAX_ORDER_LIMIT);
+        1 << (31 - m.leading_zeros())
+    }
+
+    /// n_max = clamp(next_pow2(ceil(longest_edge · density)), 2, cap): the largest order of
+    /// a triangle whose longest edge is `longest_edge` metres.
+    pub fn max_order_for(&self, longest_edge: f32) -> u32 {
+        let target = (longest_edge * self.density).ceil();
+        let target = if target.is_finite() && target > 2.0 {
+            (target.min(MAX_ORDER_LIMIT as f32) as u32).next_power_of_two()
+        } else {
+            2
+        };
+        target.clamp(2, self.order_cap())
+    }
+}
+
+/// Running totals over all estimates a cache received.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub(crate) struct EstimateTotals {
+    pub points: u64,
+    pub samples: u64,
+    pub max_samples: u32,
+    pub rel_error_sum: f64,
+}
+
+impl EstimateTotals {
+    pub fn add(&mut self, e: &Estimate) {
+        self.points += 1;
+        self.samples += e.samples as u64;
+        self.max_samples = self.max_samples.max(e.samples);
+        self.rel_error_sum += e.rel_error as f64;
+    }
+
+    pub fn stats(&self) -> CacheStats {
+        CacheStats {
+            sample_points: self.points,
+            samples: self.samples,
+            max_samples_per_point: self.max_samples,
+            mean_rel_error: if self.points == 0 {
+                0.0
+            } else {
+                self.rel_error_sum / self.points as f64
+            },
+            ..Default::default()
+        }
+    }
+}
+
+/// Burial state of a sample while baking.
+const VALID: u8 = 0;
+const BURIED: u8 = 1;
+const FILLED_NOW: u8 = 2;
+const FILLED: u8 = 3;
+
+/// What only baking needs: raw estimates, their errors, burial flags, refinement state.
+/// Arrays are parallel to the stored samples.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Working {
+    /// Maximum order per triangle.
+    max_orders: Vec<u32>,
+    /// Whether each grid slot asks to double (or, before its first round, to be baked).
+    refine: Vec<bool>,
+    /// Grid slots whose new samples the current round estimates, ascending.
+    pending: Vec<u32>,
+    /// Number of points the current round asked for.
+    pending_points: usize,
+    /// Raw estimates E and their standard errors.
+    raw: Vec<Vec3>,
+    std_error: Vec<Vec3>,
+    /// Values after burial filling, and their standard errors.
+    filled: Vec<Vec3>,
+    filled_error: Vec<Vec3>,
+    /// Burial state ([`BURIED`] for buried samples, [`VALID`] otherwise).
+    burial: Vec<u8>,
+}
+
+/// Per-triangle adaptive irradiance maps (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IrradianceMaps {
+    settings: IrradianceMapSettings,
+    /// log2 of the order of each grid slot `2·triangle + side`; 0: not baked.
+    log2_orders: Vec<u8>,
+    /// First sample of each grid slot in `packed`.
+    offsets: Vec<u32>,
+    /// RGB9E5 samples, grid by grid, each in [`grid_index`] order.
+    packed: Vec<u32>,
+    scale: Rgb9e5Scale,
+    totals: EstimateTotals,
+    buried: u64,
+    #[serde(skip)]
+    working: Option<Box<Working>>,
+}
+
+impl IrradianceMaps {
+    /// Unbaked maps for `scene`: every front side, and the back sides `settings` asks
+    /// for, will start at order 2.
+    pub fn new(scene: &TracedScene, settings: IrradianceMapSettings) -> Self {
+        let triangles = scene.triangle_count();
+        let max_orders = scene
+            .positions
+            .iter()
+            .map(|[a, b, c]| {
+                let longest = (*b - *a)
+                    .length()
+                    .max((*c - *b).length())
+                    .max((*a - *c).length());
+                settings.max_order_for(longest)
+            })
+            .collect();
+        let refine = (0..2 * triangles)
+            .map(|g| {
+                g % 2 == 0 || settings.both_sides || scene.material_of((g / 2) as u32).double_sided
+            })
+            .collect();
+        Self {
+            settings,
+            log2_orders: vec![0; 2 * triangles],
+            offsets: vec![0; 2 * triangles],
+            packed: Vec::new(),
+            scale: Rgb9e5Scale::default(),
+            totals: EstimateTotals::default(),
+            buried: 0,
+            working: Some(Box::new(Working {
+                max_orders,
+                refine,
+                ..Default::default()
+            })),
+        }
+    }
+
+    /// The settings the maps were made with.
+    pub fn settings(&self) -> &IrradianceMapSettings {
+        &self.settings
+    }
+
+    #[inline]
+    fn slot(triangle: u32, front: bool) -> usize {
+        2 * triangle as usize + (!front) as usize
+    }
+
+    /// The current order of the grid on one side of `triangle` (0: not baked).
+    pub fn order(&self, triangle: u32, front: bool) -> u32 {
+        match self.log2_orders[Self::slot(triangle, front)] {
+            0 => 0,
+            l => 1 << l,
+        }
+    }
+
+    /// Stored sample (i, j) of the grid on one side of `triangle` (which must be baked).
+    #[inline]
+    pub fn sample(&self, triangle: u32, front: bool, i: u32, j: u32) -> Vec3 {
+        let g = Self::slot(triangle, front);
+        self.scale
+            .unpack(self.packed[self.offsets[g] as usize + grid_index(i, j)])
+    }
+
+    /// Whether the bake has converged (no grid asks for refinement any more).
+    pub fn is_converged(&self) -> bool {
+        self.working.is_none()
+    }
+
+    /// Fills the buried samples of the grid at `base` of order `n` from their valid
+    /// neighbours, ring by ring (module docs); writes `filled` and `filled_error`.
+    fn fill_grid(w: &mut Working, base: usize, n: u32) {
+        let size = grid_size(n);
+        let range = base..base + size;
+        w.filled[range.clone()].copy_from_slice(&w.raw[range.clone()]);
+        w.filled_error[range.clone()].copy_from_slice(&w.std_error[range.clone()]);
+        let burial = &mut w.burial[range];
+        if burial.iter().all(|&b| b == VALID) || burial.iter().all(|&b| b != VALID) {
+            return;
+        }
+        burial.iter_mut().for_each(|b| {
+            if *b != VALID {
+                *b = BURIED;
+            }
+        });
+        loop {
+            let mut changed = false;
+            for d in 0..=n {
+                for j in 0..=d {
+                    let i = d - j;
+                    let m = grid_index(i, j);
+                    if burial[m] != BURIED {
+                        continue;
+                    }
+                    let (mut sum, mut err, mut count) = (Vec3::ZERO, Vec3::ZERO, 0u32);
+                    let (ii, jj) = (i as i64, j as i64);
+                    for (di, dj) in [(-1, 0), (1, 0), (0, -1), (0, 1), (1, -1), (-1, 1)] {
+                        let (a, b) = (ii + di, jj + dj);
+                        if a < 0 || b < 0 || a + b > n as i64 {
+                            continue;
+                        }
+                        let k = grid_index(a as u32, b as u32);
+                        if burial[k] == VALID || burial[k] == FILLED {
+                            sum += w.filled[base + k];
+                            err += w.filled_error[base + k];
+                            count += 1;
+                        }
+                    }
+                    if count > 0 {
+                        w.filled[base + m] = sum / count as f32;
+                        w.filled_error[base + m] = err / count as f32;
+                        burial[m] = FILLED_NOW;
+                        changed = true;
+                    }
+                }
+            }
+            if !changed {
+                break;
+            }
+            burial.iter_mut().for_each(|b| {
+                if *b == FILLED_NOW {
+                    *b = FILLED;
+                }
+            });
+        }
+    }
+
+    /// The refinement test of a grid of order `n` at `base` that just doubled (or was
+    /// just made): the largest noise-corrected relative difference e between a new,
+    /// non-buried sample and the coarse interpolation there (module docs).
+    fn interpolation_error(&self, w: &Working, base: usize, n: u32) -> f32 {
+        let k = self.settings.noise_sigmas;
+        let eps = self.settings.floor;
+        let mut worst = 0.0f32;
+        for_each_new_sample(n / 2, n, |i, j, m| {
+            if w.burial[base + m] != VALID {
+                return;
+            }
+            let [[ai, aj], [bi, bj]] = coarse_neighbours(i, j);
+            let (a, b) = (base + grid_index(ai, aj), base + grid_index(bi, bj));
+            let interp = 0.5 * (w.filled[a] + w.filled[b]);
+            let sigma2 = w.std_error[base + m] * w.std_error[base + m]
+                + 0.25
+                    * (w.filled_error[a] * w.filled_error[a]
+                        + w.filled_error[b] * w.filled_error[b]);
+            let value = w.raw[base + m];
+            for c in 0..3 {
+                let excess = ((value[c] - interp[c]).abs() - k * sigma2[c].sqrt()).max(0.0);
+                if excess > 0.0 {
+                    let e = excess / (value[c].max(0.0) + eps);
+                    worst = worst.max(if e.is_nan() { f32::INFINITY } else { e });
+                }
+            }
+        });
+        worst
+    }
+}
+
+impl SurfaceCache for IrradianceMaps {
+    fn method(&self) -> Method {
+        Method::IrradianceMap
+    }
+
+    fn next_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>) {
+        let Some(w) = self.working.as_mut() else {
+            return;
+        };
+        w.pending.clear();
+        w.pending
+            .extend((0..w.refine.len() as u32).filter(|&g| w.refine[g as usize]));
+        if w.pending.is_empty() {
+            self.working = None;
+            return;
+        }
+        let start = points.len();
+        for &g in &w.pending {
+            let (t, front) = (g / 2, g % 2 == 0);
+            let coarse = match self.log2_orders[g as usize] {
+                0 => 0,
+                l => 1u32 << l,
+            };
+            let n = if coarse == 0 { 2 } else { 2 * coarse };
+            let key = scene.triangle_key(t);
+            let inv = 1.0 / n as f32;
+            for_each_new_sample(coarse, n, |i, j, _| {
+                points.push(SamplePoint {
+                    site: SampleSite::Surface {
+                        triangle: t,
+                        uv: Vec2::new(i as f32 * inv, j as f32 * inv),
+                        front,
+                    },
+                    key: sample_key(key, front, i, j, n),
+                });
+            });
+        }
+        w.pending_points = points.len() - start;
+    }
+
+    fn finish_round(
+        &mut self,
+        _scene: &TracedScene,
+        points: &[SamplePoint],
+        estimates: &[Estimate],
+    ) {
+        let Some(mut w) = self.working.take() else {
+            return;
+        };
+        assert_eq!(
+            (points.len(), estimates.len()),
+            (w.pending_points, w.pending_points),
+            "finish_round needs the estimates of the points next_round asked for"
+        );
+        // New layout: pending grids double (fresh ones start at order 2).
+        let slots = self.log2_orders.len();
+        let mut new_log2 = self.log2_orders.clone();
+        for &g in &w.pending {
+            new_log2[g as usize] += 1;
+        }
+        let order_of = |l: u8| if l == 0 { 0 } else { 1u32 << l };
+        let mut offsets = vec![0u32; slots];
+        let mut total = 0usize;
+        for g in 0..slots {
+            offsets[g] = total as u32;
+            if new_log2[g] > 0 {
+                total += grid_size(order_of(new_log2[g]));
+            }
+        }
+        // Move the old samples to their places in the doubled grids.
+        let mut raw = vec![Vec3::ZERO; total];
+        let mut std_error = vec![Vec3::ZERO; total];
+        let mut burial = vec![VALID; total];
+        for g in 0..slots {
+            let (old, new) = (order_of(self.log2_orders[g]), order_of(new_log2[g]));
+            if old == 0 {
+                continue;
+            }
+            let (from, to) = (self.offsets[g] as usize, offsets[g] as usize);
+            if old == new {
+                let s = grid_size(old);
+                raw[to..to + s].copy_from_slice(&w.raw[from..from + s]);
+                std_error[to..to + s].copy_from_slice(&w.std_error[from..from + s]);
+                burial[to..to + s].copy_from_slice(&w.burial[from..from + s]);
+            } else {
+                for d in 0..=old {
+                    for j in 0..=d {
+                        let i = d - j;
+                        let (a, b) = (from + grid_index(i, j), to + grid_index(2 * i, 2 * j));
+                        raw[b] = w.raw[a];
+                        std_error[b] = w.std_error[a];
+                        burial[b] = if w.burial[a] == VALID { VALID } else { BURIED };
+                    }
+                }
+            }
+        }
+        // Store the new estimates, in the order next_round asked for them.
+        let threshold = self.settings.buried_threshold;
+        let mut next = 0usize;
+        for &g in &w.pending {
+            let n = order_of(new_log2[g as usize]);
+            let coarse = order_of(self.log2_orders[g as usize]);
+            let base = offsets[g as usize] as usize;
+            for_each_new_sample(coarse, n, |_, _, m| {
+                let e = &estimates[next];
+                next += 1;
+                raw[base + m] = e.value;
+                std_error[base + m] = e.std_error;
+                burial[base + m] = if e.back_face_share > threshold {
+                    BURIED
+                } else {
+                    VALID
+                };
+                self.totals.add(e);
+            });
+        }
+        self.log2_orders = new_log2;
+        self.offsets = offsets;
+        w.raw = raw;
+        w.std_error = std_error;
+        w.burial = burial;
+        // Fill buried samples (every grid: cheap, and independent of history).
+        w.filled = vec![Vec3::ZERO; total];
+        w.filled_error = vec![Vec3::ZERO; total];
+        for g in 0..slots {
+            let n = order_of(self.log2_orders[g]);
+            if n > 0 {
+                Self::fill_grid(&mut w, self.offsets[g] as usize, n);
+            }
+        }
+        self.buried = w.burial.iter().filter(|&&b| b != VALID).count() as u64;
+        // Decide which of the grids that just doubled double again.
+        w.refine.iter_mut().for_each(|r| *r = false);
+        let bound = self.settings.interpolation_error;
+        for &g in &w.pending {
+            let n = order_of(self.log2_orders[g as usize]);
+            if n < w.max_orders[g as usize / 2] {
+                let e = self.interpolation_error(&w, self.offsets[g as usize] as usize, n);
+                w.refine[g as usize] = e > bound;
+            }
+        }
+        w.pending.clear();
+        w.pending_points = 0;
+        // Pack: RGB9E5 with a scale for the largest value.
+        let max = w.filled.iter().fold(0.0f32, |m, v| m.max(v.max_element()));
+        self.scale = Rgb9e5Scale::for_max(max);
+        self.packed.clear();
+        self.packed
+            .extend(w.filled.iter().map(|&v| self.scale.pack(v)));
+        self.working = Some(w);
+    }
+
+    fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
+        let g = Self::slot(triangle, front);
+        let l = self.log2_orders[g];
+        if l == 0 {
+            return Vec3::ZERO;
+        }
+        let base = self.offsets[g] as usize;
+        let packed = &self.packed[base..base + grid_size(1 << l)];
+        grid_interpolate(1 << l, uv, |i, j| {
+            self.scale.unpack(packed[grid_index(i, j)])
+        })
+    }
+
+    fn stats(&self) -> CacheStats {
+        let mut order_histogram = BTreeMap::new();
+        for &l in &self.log2_orders {
+            if l > 0 {
+                *order_histogram.entry(1u32 << l).or_insert(0) += 1;
+            }
+        }
+        CacheStats {
+            cache_bytes: 4 * self.packed.len() as u64 + 5 * self.log2_orders.len() as u64 + 4,
+            order_histogram,
+            buried: self.buried,
+            ..self.totals.stats()
+        }
+    }
+
+    fn publish(&self, scene: &TracedScene) -> Vec<IrradianceTexture> {
+        mesh_colour::publish_all(
+            scene,
+            |t, front| self.order(t, front),
+            |t, front, i, j| {
+                if self.order(t, front) == 0 {
+                    Vec3::ZERO
+                } else {
+                    self.sample(t, front, i, j)
+                }
+            },
+        )
+    }
+}

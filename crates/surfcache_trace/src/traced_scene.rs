@@ -314,6 +314,12 @@ impl TracedScene {
     /// the same distance along the geometric normal of its side. The edge step is the
     /// thesis' leak guard: a wall that meets the triangle's edge is never closer to the
     /// origin than the offset, so rays cannot slip past it.
+    ///
+    /// A point closer than the offset to an edge moves to the nearest point of the
+    /// triangle inset by the offset (the image of the triangle under the homothety about
+    /// the incentre I with ratio (r − offset)/r, r the inradius): straight off a single
+    /// edge, and into the inset corner near a vertex, where stepping off one edge after
+    /// the other would leave acute corners (< 60°) outside the neighbouring edge.
     #[inline]
     pub fn spawn_origin(&self, p: &SurfacePoint) -> Vec3 {
         let off = self.spawn_offset();
@@ -321,18 +327,22 @@ impl TracedScene {
         let mu = self.geometric_normals[p.triangle as usize];
         let (la, lb, lc) = ((c - b).length(), (a - c).length(), (b - a).length());
         let twice_area = (b - a).cross(c - a).length();
-        let inradius = twice_area / (la + lb + lc);
+        let perimeter = la + lb + lc;
+        let inradius = twice_area / perimeter;
+        let incentre = (a * la + b * lb + c * lc) / perimeter;
         let mut q = p.position;
         if inradius <= 2.0 * off {
-            q = (a * la + b * lb + c * lc) / (la + lb + lc);
+            q = incentre;
         } else {
-            for (e0, e1) in [(a, b), (b, c), (c, a)] {
+            let near_edge = [(a, b), (b, c), (c, a)].into_iter().any(|(e0, e1)| {
                 // In-plane normal of the edge pointing into the (counter-clockwise) triangle.
                 let inward = mu.cross(e1 - e0).normalize();
-                let distance = (q - e0).dot(inward);
-                if distance < off {
-                    q += inward * (off - distance);
-                }
+                (q - e0).dot(inward) < off
+            });
+            if near_edge {
+                let k = (inradius - off) / inradius;
+                let [a2, b2, c2] = [a, b, c].map(|x| incentre + (x - incentre) * k);
+                q = triangle_point(a2, b2, c2, closest_point_barycentric(q, a2, b2, c2));
             }
         }
         q + p.geometric_normal * off
@@ -379,5 +389,66 @@ impl TracedScene {
         let (_, _, _, t, uv) = best?;
         let front = self.geometric_normals[t as usize].dot(n) >= 0.0;
         Some(self.surface_point(t, uv, front))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Affine3A;
+    use surfcache_core::{Instance, Mesh};
+
+    /// Every spawn origin lies at least the offset inside all three edges, also at acute
+    /// corners (the leak guard).
+    #[test]
+    fn spawn_origins_keep_the_offset_from_every_edge() {
+        // Corners of 10°, 45°, 90°, 135° and an obtuse sliver-free triangle.
+        let triangles = [
+            [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 0.176, 0.0)],
+            [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0)],
+            [
+                Vec3::ZERO,
+                Vec3::new(2.0, 0.0, 0.3),
+                Vec3::new(-0.5, 0.5, 0.0),
+            ],
+        ];
+        for tri in triangles {
+            let mesh = Mesh::new("t", tri.to_vec(), vec![[0, 1, 2]]);
+            let scene = Scene {
+                instances: vec![Instance {
+                    name: "t".into(),
+                    mesh: Arc::new(mesh),
+                    material: Arc::new(Material::default()),
+                    transform: Affine3A::IDENTITY,
+                }],
+                ..Default::default()
+            };
+            let s = TracedScene::new(&scene).unwrap();
+            let off = s.spawn_offset();
+            let [a, b, c] = s.positions[0];
+            let mu = s.geometric_normals[0];
+            for uv in [
+                Vec2::ZERO,
+                Vec2::X,
+                Vec2::Y,
+                Vec2::new(0.5, 0.0),
+                Vec2::new(0.5, 0.5),
+                Vec2::new(0.0, 0.5),
+                Vec2::new(1e-6, 1e-6),
+                Vec2::splat(1.0 / 3.0),
+            ] {
+                for front in [true, false] {
+                    let p = s.surface_point(0, uv, front);
+                    let o = s.spawn_origin(&p);
+                    for (e0, e1) in [(a, b), (b, c), (c, a)] {
+                        let inward = mu.cross(e1 - e0).normalize();
+                        let d = (o - e0).dot(inward);
+                        assert!(d >= 0.99 * off, "{tri:?} {uv}: {d} < {off}");
+                    }
+                    let lift = (o - p.position).dot(p.geometric_normal);
+                    assert!((lift - off).abs() < 1e-3 * off + 1e-7);
+                }
+            }
+        }
     }
 }

@@ -1,0 +1,375 @@
+//! Irradiance-map grids without ray tracing: indexing, keys, interpolation, refinement
+//! that keeps every sample, buried samples, and vertex-lighting bookkeeping. Estimates are
+//! synthetic (see `common::bake_synthetic`).
+
+mod common;
+
+use common::{Points, bake_synthetic, instance};
+use std::collections::HashSet;
+use surfcache_cache::{
+    SampleSite, SurfaceCache,
+    irradiance_map::{
+        IrradianceMapSettings, IrradianceMaps, coarse_neighbours, grid_index, grid_interpolate,
+        grid_size, sample_key,
+    },
+    rgb9e5::Rgb9e5Scale,
+    vertex_lighting::{VertexLighting, VertexLightingSettings},
+};
+use surfcache_core::{
+    Material, Mesh, Scene,
+    glam::{Vec2, Vec3},
+    scenes::quad,
+};
+use surfcache_trace::TracedScene;
+
+#[test]
+fn grid_index_enumerates_each_grid_diagonal_by_diagonal() {
+    for n in [1u32, 2, 4, 8, 16, 64] {
+        let mut next = 0;
+        for d in 0..=n {
+            for j in 0..=d {
+                assert_eq!(grid_index(d - j, j), next, "n={n} ({}, {j})", d - j);
+                next += 1;
+            }
+        }
+        assert_eq!(next, grid_size(n));
+        assert_eq!(grid_size(n), ((n + 1) * (n + 2) / 2) as usize);
+    }
+    assert_eq!(
+        [(0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2)].map(|(i, j)| grid_index(i, j)),
+        [0, 1, 2, 3, 4, 5]
+    );
+}
+
+#[test]
+fn new_samples_halve_coarse_edges() {
+    for n in [2u32, 4, 8, 16] {
+        for d in 0..=n {
+            for j in 0..=d {
+                let i = d - j;
+                if i % 2 == 0 && j % 2 == 0 {
+                    continue;
+                }
+                let [[ai, aj], [bi, bj]] = coarse_neighbours(i, j);
+                for (x, y) in [(ai, aj), (bi, bj)] {
+                    assert!(x % 2 == 0 && y % 2 == 0 && x + y <= n, "({i},{j}) of {n}");
+                }
+                assert_eq!((ai + bi, aj + bj), (2 * i, 2 * j));
+                // The ends of one coarse cell edge: a row, column or diagonal step.
+                let step = (bi as i32 - ai as i32, bj as i32 - aj as i32);
+                assert!(
+                    matches!(step, (2, 0) | (0, 2) | (-2, 2)),
+                    "({i},{j}): {step:?}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn keys_depend_on_position_not_order() {
+    let k = 0xDEAD_BEEF_u64;
+    for (i, j, n) in [(0, 0, 2), (1, 0, 2), (1, 1, 2), (3, 5, 8), (7, 0, 16)] {
+        assert_eq!(
+            sample_key(k, true, i, j, n),
+            sample_key(k, true, 2 * i, 2 * j, 2 * n)
+        );
+        assert_eq!(
+            sample_key(k, false, i, j, n),
+            sample_key(k, false, 4 * i, 4 * j, 4 * n)
+        );
+        assert_ne!(sample_key(k, true, i, j, n), sample_key(k, false, i, j, n));
+        assert_ne!(
+            sample_key(k, true, i, j, n),
+            sample_key(k + 1, true, i, j, n)
+        );
+    }
+    let mut seen = HashSet::new();
+    for d in 0..=64u32 {
+        for j in 0..=d {
+            assert!(seen.insert(sample_key(k, true, d - j, j, 64)));
+        }
+    }
+}
+
+#[test]
+fn max_order_follows_density_and_cap() {
+    let s = IrradianceMapSettings {
+        density: 10.0,
+        max_order: 48, // rounded down to 32
+        ..Default::default()
+    };
+    assert_eq!(s.order_cap(), 32);
+    assert_eq!(s.max_order_for(0.01), 2);
+    assert_eq!(s.max_order_for(0.25), 4); // ceil(2.5) = 3 → 4
+    assert_eq!(s.max_order_for(0.8), 8);
+    assert_eq!(s.max_order_for(1.6), 16);
+    assert_eq!(s.max_order_for(100.0), 32);
+}
+
+#[test]
+fn grid_interpolation_is_exact_for_linear_functions_and_at_samples() {
+    let f = |uv: Vec2| Vec3::new(1.0 + 2.0 * uv.x - uv.y, 3.0 * uv.y, 0.5);
+    let mut rng = Points(5);
+    for n in [1u32, 2, 4, 16] {
+        let grid = |i: u32, j: u32| f(Vec2::new(i as f32, j as f32) / n as f32);
+        for _ in 0..500 {
+            let uv = rng.barycentrics();
+            assert!((grid_interpolate(n, uv, grid) - f(uv)).abs().max_element() < 1e-5);
+        }
+        // A bumpy grid is reproduced at its own samples.
+        let bumpy = |i: u32, j: u32| Vec3::splat(((i * 7 + j * 3) % 5) as f32);
+        for d in 0..=n {
+            for j in 0..=d {
+                let uv = Vec2::new((d - j) as f32, j as f32) / n as f32;
+                assert_eq!(grid_interpolate(n, uv, bumpy), bumpy(d - j, j));
+            }
+        }
+    }
+}
+
+fn unit_floor() -> Scene {
+    let v = Vec3::new;
+    Scene {
+        instances: vec![instance(
+            quad(
+                "floor",
+                [v(0., 0., 0.), v(1., 0., 0.), v(1., 0., 1.), v(0., 0., 1.)],
+                Vec3::Y,
+            ),
+            Material::default(),
+        )],
+        ..Default::default()
+    }
+}
+
+#[test]
+fn refinement_keeps_every_sample_and_asks_only_for_new_ones() {
+    let traced = TracedScene::new(&unit_floor()).unwrap();
+    // A ramp that is steep around x = 0.4 (refines up to the cap) and whose maximum
+    // (at x = 1) is already sampled in round 0, so the RGB9E5 scale never changes.
+    let f = |x: f32| Vec3::new(1.0 + 4.0 / (1.0 + (-(x - 0.4) * 40.0).exp()), 2.0, 0.5);
+    let settings = IrradianceMapSettings {
+        density: 1000.0,
+        max_order: 16,
+        both_sides: false,
+        ..Default::default()
+    };
+    let mut maps = IrradianceMaps::new(&traced, settings);
+    let mut keys = HashSet::new();
+    let mut previous: Vec<(u32, u32, Vec<Vec3>)> = Vec::new();
+    let mut round = 0;
+    loop {
+        let mut points = Vec::new();
+        maps.next_round(&traced, &mut points);
+        if points.is_empty() {
+            break;
+        }
+        for p in &points {
+            assert!(
+                keys.insert(p.key),
+                "round {round}: a sample was asked for twice"
+            );
+            let SampleSite::Surface {
+                triangle,
+                uv,
+                front,
+            } = p.site
+            else {
+                panic!("irradiance maps sample surfaces")
+            };
+            assert!(front);
+            // New samples have an odd index coordinate at their grid's new order.
+            if round > 0 {
+                let n = (2 * maps.order(triangle, true)) as f32;
+                let (i, j) = ((uv.x * n).round() as u32, (uv.y * n).round() as u32);
+                assert!(i % 2 == 1 || j % 2 == 1, "round {round}: ({i},{j}) not new");
+            }
+        }
+        let estimates: Vec<_> = points
+            .iter()
+            .map(|p| {
+                let (sp, _) = surfcache_cache::bake::sample_frame(&traced, &p.site);
+                surfcache_trace::Estimate {
+                    value: f(sp.position.x),
+                    samples: 1,
+                    ..Default::default()
+                }
+            })
+            .collect();
+        maps.finish_round(&traced, &points, &estimates);
+        // Every sample of the previous round's grids is where doubling puts it.
+        for &(t, n_old, ref old) in &previous {
+            let n = maps.order(t, true);
+            let ratio = n / n_old;
+            for d in 0..=n_old {
+                for j in 0..=d {
+                    let i = d - j;
+                    assert_eq!(
+                        maps.sample(t, true, ratio * i, ratio * j),
+                        old[grid_index(i, j)],
+                        "round {round}: triangle {t} ({i},{j}) of {n_old} moved"
+                    );
+                }
+            }
+        }
+        previous = (0..2u32)
+            .map(|t| {
+                let n = maps.order(t, true);
+                let mut v = Vec::new();
+                for d in 0..=n {
+                    for j in 0..=d {
+                        v.push(maps.sample(t, true, d - j, j));
+                    }
+                }
+                (t, n, v)
+            })
+            .collect();
+        round += 1;
+    }
+    assert!(round >= 3, "only {round} rounds");
+    let stats = maps.stats();
+    assert_eq!(stats.order_histogram.values().sum::<u64>(), 2);
+    assert_eq!(stats.order_histogram.keys().max(), Some(&16));
+    // Every estimate was kept: as many points as the final grids hold.
+    let held: usize = (0..2).map(|t| grid_size(maps.order(t, true))).sum();
+    assert_eq!(stats.sample_points as usize, held);
+    assert_eq!(
+        stats.cache_bytes,
+        4 * held as u64 + 5 * 4 + 4,
+        "4 bytes per sample, 5 per grid slot (2 triangles × 2 sides), 4 for the scale"
+    );
+    // Lookups at every sample return its estimate (up to RGB9E5 rounding).
+    let scale = Rgb9e5Scale::for_max(5.0);
+    for t in 0..2u32 {
+        let n = maps.order(t, true);
+        let [a, b, c] = traced.positions[t as usize];
+        for d in 0..=n {
+            for j in 0..=d {
+                let uv = Vec2::new((d - j) as f32, j as f32) / n as f32;
+                let x = (a * (1.0 - uv.x - uv.y) + b * uv.x + c * uv.y).x;
+                let want = scale.unpack(scale.pack(f(x)));
+                assert!((maps.lookup(t, uv, true) - want).abs().max_element() < 1e-4);
+            }
+        }
+    }
+}
+
+#[test]
+fn buried_samples_are_filled_from_neighbours_and_counted() {
+    let v = Vec3::new;
+    let mut scene = unit_floor();
+    // A second quad far above, buried all over.
+    scene.instances.push(instance(
+        quad(
+            "attic",
+            [v(0., 5., 0.), v(1., 5., 0.), v(1., 5., 1.), v(0., 5., 1.)],
+            Vec3::Y,
+        ),
+        Material::default(),
+    ));
+    let traced = TracedScene::new(&scene).unwrap();
+    let buried = |p: Vec3| p.z > 0.6 || p.y > 4.0;
+    let settings = IrradianceMapSettings {
+        both_sides: false,
+        ..Default::default()
+    };
+    let (maps, _) = bake_synthetic(&traced, IrradianceMaps::new(&traced, settings), |p| {
+        if buried(p.position) {
+            (Vec3::splat(1000.0), 0.9)
+        } else {
+            (Vec3::splat(5.0), 0.1)
+        }
+    });
+    let stats = maps.stats();
+    // Floor triangle (0,0),(1,0),(1,1): 1 of 6 samples under z > 0.6; (0,0),(1,1),(0,1):
+    // 3 of 6; the attic: all 12.
+    assert_eq!(stats.buried, 1 + 3 + 12);
+    // Buried samples do not drive refinement.
+    assert_eq!(
+        stats.order_histogram.into_iter().collect::<Vec<_>>(),
+        [(2, 4)]
+    );
+    let mut rng = Points(9);
+    for _ in 0..200 {
+        let uv = rng.barycentrics();
+        for t in 0..2 {
+            let e = maps.lookup(t, uv, true);
+            assert!(
+                (e - Vec3::splat(5.0)).abs().max_element() < 0.02,
+                "floor {t}: {e}"
+            );
+        }
+        for t in 2..4 {
+            // Buried everywhere: the raw values stay.
+            let e = maps.lookup(t, uv, true);
+            assert!(
+                (e - Vec3::splat(1000.0)).abs().max_element() < 2.0,
+                "attic {t}: {e}"
+            );
+        }
+    }
+    // The back side was not asked for: it reads zero.
+    assert_eq!(maps.lookup(0, Vec2::splat(0.3), false), Vec3::ZERO);
+}
+
+#[test]
+fn vertex_lighting_estimates_each_mesh_vertex_once_per_side() {
+    // A 2×2-cell grid mesh with shared vertices: 9 vertices, 8 triangles; two instances.
+    let mut positions = Vec::new();
+    for j in 0..3 {
+        for i in 0..3 {
+            positions.push(Vec3::new(i as f32, 0.0, j as f32));
+        }
+    }
+    let mut indices = Vec::new();
+    for j in 0..2u32 {
+        for i in 0..2u32 {
+            let a = j * 3 + i;
+            indices.push([a, a + 3, a + 4]);
+            indices.push([a, a + 4, a + 1]);
+        }
+    }
+    let mesh = Mesh::new("grid", positions, indices);
+    let mut second = instance(mesh.clone(), Material::default());
+    second.name = "grid2".into();
+    second.transform = surfcache_core::glam::Affine3A::from_translation(Vec3::Y);
+    let scene = Scene {
+        instances: vec![instance(mesh, Material::default()), second],
+        ..Default::default()
+    };
+    let traced = TracedScene::new(&scene).unwrap();
+    let (vl, rounds) = bake_synthetic(
+        &traced,
+        VertexLighting::new(&traced, VertexLightingSettings::default()),
+        |p| {
+            (
+                Vec3::new(p.position.x, p.position.z, 1.0 + p.position.y),
+                0.0,
+            )
+        },
+    );
+    assert_eq!(rounds.len(), 1);
+    assert_eq!(vl.vertex_count(), 18);
+    assert_eq!(rounds[0].len(), 36);
+    let keys: HashSet<u64> = rounds[0].iter().map(|p| p.key).collect();
+    assert_eq!(keys.len(), 36);
+    let stats = vl.stats();
+    assert_eq!(stats.sample_points, 36);
+    assert_eq!(stats.cache_bytes, 4 * 36 + 12 * 16 + 4);
+    // E is linear in position here, so barycentric interpolation is exact.
+    let mut rng = Points(3);
+    for t in 0..16u32 {
+        let [a, b, c] = traced.positions[t as usize];
+        for _ in 0..20 {
+            let uv = rng.barycentrics();
+            let p = a * (1.0 - uv.x - uv.y) + b * uv.x + c * uv.y;
+            let want = Vec3::new(p.x, p.z, 1.0 + p.y);
+            let got = vl.lookup(t, uv, true);
+            assert!(
+                (got - want).abs().max_element() < 0.01,
+                "{t} {uv}: {got} vs {want}"
+            );
+        }
+    }
+}
