@@ -16,6 +16,7 @@
 
 pub mod atlas;
 pub mod bake;
+pub mod charts;
 pub mod irradiance_map;
 pub mod lightmap;
 pub mod mesh_colour;
