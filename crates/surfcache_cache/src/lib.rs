@@ -17,6 +17,7 @@
 pub mod archive;
 pub mod atlas;
 pub mod bake;
+pub mod charts;
 pub mod irradiance_map;
 pub mod lightmap;
 pub mod mesh_colour;

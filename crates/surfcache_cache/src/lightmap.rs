@@ -1,1 +1,671 @@
-//! Texel lightmaps on TEXCOORD_1 or a generated chart atlas (DESIGN.md §3.3). (In progress.)
+//! Texel lightmaps on TEXCOORD_1 or a generated chart atlas (DESIGN.md §3.3): irradiance
+//! per texel of one texture per instance, looked up exactly as an engine samples it.
+//!
+//! - **Layout.** An instance whose mesh has a usable TEXCOORD_1 keeps it; its square
+//!   texture has the side √(world area / UV1 area) × density. Otherwise
+//!   [`charts::generate_atlas`] makes one from coplanar charts.
+//! - **Rasterisation.** Every triangle covers every texel its UV1 footprint overlaps
+//!   (conservative rasterisation, [`conservative_texels`]). A texel belongs to one
+//!   triangle: the one containing its centre, else the nearest; it is estimated at the
+//!   centre, or at the closest point of its triangle, nudged inside.
+//! - **One round.** Every owned texel is one [`SampleSite::Surface`] on the front side, and
+//!   on the back side in a second layer when [`LightmapSettings::both_sides`]; texels are
+//!   adaptive through the estimator's stopping rule, not through refinement.
+//! - **Buried texels** (estimates whose first rays mostly hit back faces: the texel lies
+//!   inside other geometry) are refilled from valid neighbours, and texels owned by no
+//!   triangle are **dilated** from their neighbours `gutter` times, so that bilinear
+//!   filtering at chart borders never pulls in black.
+//! - **Storage.** RGB9E5 (4 bytes a texel) with one power-of-two [`Rgb9e5Scale`].
+
+use crate::{
+    CacheStats, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
+    charts::{self, TEXEL_EPSILON},
+    rgb9e5::Rgb9e5Scale,
+};
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use surfcache_core::{
+    geometry::{closest_point_barycentric, interpolate, triangle_area},
+    sampling::splitmix64,
+};
+use surfcache_trace::{Estimate, TracedScene};
+
+/// How lightmaps are laid out and which texels are trusted.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LightmapSettings {
+    /// Texels per metre along a surface (density² texels per m²). Default 64: texels of
+    /// 1.6 cm, about 35 across a Cornell-box wall.
+    pub texels_per_metre: f32,
+    /// Largest texture side in texels; generated atlases lower their density to fit,
+    /// TEXCOORD_1 textures are clamped. Default 2048.
+    pub max_size: u32,
+    /// Free texels around every generated chart, filled by dilation. Default 2: bilinear
+    /// filtering reads one texel beyond a chart; the second keeps mipmap level 1 clean.
+    pub gutter: u32,
+    /// Also bake the back side of every surface (a second layer; published for
+    /// double-sided materials). Default true.
+    pub both_sides: bool,
+    /// A texel whose estimate has a back-face share ([`Estimate::back_face_share`]) above
+    /// this is buried in geometry and refilled from its neighbours. Default 0.5; above 1
+    /// turns detection off.
+    pub buried_threshold: f32,
+}
+
+impl Default for LightmapSettings {
+    fn default() -> Self {
+        Self {
+            texels_per_metre: 64.0,
+            max_size: 2048,
+            gutter: 2,
+            both_sides: true,
+            buried_threshold: 0.5,
+        }
+    }
+}
+
+/// No triangle owns the texel.
+const NONE: u32 = u32::MAX;
+
+/// Barycentric margin of sample positions: every barycentric coordinate is at least this.
+const INSIDE_MARGIN: f32 = 1e-4;
+
+/// Texel states while filling.
+const EMPTY: u8 = 0;
+const VALID: u8 = 1;
+const BURIED: u8 = 2;
+
+/// One instance's texture within the flat texel arrays of a layer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct InstanceMap {
+    width: u32,
+    height: u32,
+    /// First texel of the instance in a layer.
+    offset: usize,
+    uses_mesh_uv1: bool,
+    texels_per_metre: f32,
+}
+
+impl InstanceMap {
+    fn texels(&self) -> usize {
+        (self.width * self.height) as usize
+    }
+}
+
+/// Per-texel irradiance of every instance in its own texture (module docs).
+pub struct Lightmaps {
+    settings: LightmapSettings,
+    maps: Vec<InstanceMap>,
+    /// Instance of each traced triangle.
+    triangle_instance: Vec<u32>,
+    /// UV1 per traced triangle, in the traced scene's corner order, UV units.
+    uv1: Vec<[Vec2; 3]>,
+    /// Chart (coplanar group, numbered over the whole scene) of each triangle.
+    chart: Vec<u32>,
+    /// Texels in one layer (all instances), and the number of layers (1 or 2).
+    layer_texels: usize,
+    layers: usize,
+    /// Owning triangle and sample barycentrics per texel of a layer (kept until the bake
+    /// is finished).
+    owner: Vec<u32>,
+    sample_uv: Vec<Vec2>,
+    /// Texel slot (layer · layer_texels + texel) of each point of the round.
+    slots: Vec<u32>,
+    emitted: bool,
+    /// RGB9E5 texels of all layers.
+    packed: Vec<u32>,
+    scale: Rgb9e5Scale,
+    stats: CacheStats,
+}
+
+/// What one instance's layout contributes before the instances are concatenated.
+struct BuiltInstance {
+    map: InstanceMap,
+    uv1: Vec<[Vec2; 3]>,
+    chart: Vec<u32>,
+    chart_count: u32,
+    owner: Vec<u32>,
+    sample_uv: Vec<Vec2>,
+}
+
+impl Lightmaps {
+    /// Lays out and rasterises every instance of `scene` (in parallel over instances).
+    pub fn new(scene: &TracedScene, settings: LightmapSettings) -> Self {
+        let built: Vec<BuiltInstance> = (0..scene.instance_triangles.len())
+            .into_par_iter()
+            .map(|i| build_instance(scene, i, &settings))
+            .collect();
+        let n = scene.triangle_count();
+        let mut maps = Vec::with_capacity(built.len());
+        let mut uv1 = Vec::with_capacity(n);
+        let mut chart = Vec::with_capacity(n);
+        let mut triangle_instance = Vec::with_capacity(n);
+        let mut owner = Vec::new();
+        let mut sample_uv = Vec::new();
+        let mut chart_base = 0u32;
+        for (i, b) in built.into_iter().enumerate() {
+            let mut map = b.map;
+            map.offset = owner.len();
+            maps.push(map);
+            uv1.extend_from_slice(&b.uv1);
+            chart.extend(b.chart.iter().map(|c| c + chart_base));
+            chart_base += b.chart_count;
+            triangle_instance.extend(std::iter::repeat_n(i as u32, b.uv1.len()));
+            owner.extend_from_slice(&b.owner);
+            sample_uv.extend_from_slice(&b.sample_uv);
+        }
+        let layer_texels = owner.len();
+        let layers = if settings.both_sides { 2 } else { 1 };
+        Self {
+            settings,
+            maps,
+            triangle_instance,
+            uv1,
+            chart,
+            layer_texels,
+            layers,
+            owner,
+            sample_uv,
+            slots: Vec::new(),
+            emitted: false,
+            packed: vec![0; layers * layer_texels],
+            scale: Rgb9e5Scale::default(),
+            stats: CacheStats::default(),
+        }
+    }
+
+    /// The settings the maps were laid out with.
+    pub fn settings(&self) -> &LightmapSettings {
+        &self.settings
+    }
+
+    /// Texture width and height of `instance`.
+    pub fn texture_size(&self, instance: u32) -> [u32; 2] {
+        let m = &self.maps[instance as usize];
+        [m.width, m.height]
+    }
+
+    /// The texel density `instance` got (texels per metre): lower than asked when its
+    /// atlas had to shrink to [`LightmapSettings::max_size`]; for TEXCOORD_1 layouts the
+    /// mean over the mesh.
+    pub fn texels_per_metre(&self, instance: u32) -> f32 {
+        self.maps[instance as usize].texels_per_metre
+    }
+
+    /// UV1 of the corners of traced triangle `t`, in the traced scene's corner order.
+    pub fn triangle_uv1(&self, t: u32) -> [Vec2; 3] {
+        self.uv1[t as usize]
+    }
+
+    /// The texels of one layer of one instance.
+    fn texture_slice(&self, layer: usize, instance: usize) -> &[u32] {
+        let m = &self.maps[instance];
+        let start = layer * self.layer_texels + m.offset;
+        &self.packed[start..start + m.texels()]
+    }
+}
+
+/// Lays out instance `i`: its TEXCOORD_1 when usable, else a generated atlas; then
+/// rasterises its triangles into texel owners and sample positions.
+fn build_instance(scene: &TracedScene, i: usize, settings: &LightmapSettings) -> BuiltInstance {
+    let range = scene.instance_triangles[i].clone();
+    let (start, end) = (range.start as usize, range.end as usize);
+    let positions = &scene.positions[start..end];
+    let normals = &scene.geometric_normals[start..end];
+    let world_area: f32 = positions
+        .iter()
+        .map(|&[a, b, c]| triangle_area(a, b, c))
+        .sum();
+    let mesh_uv1 = scene.has_uv1[i].then(|| &scene.uv1[start..end]);
+    let uv_area = mesh_uv1.and_then(usable_uv1_area);
+    let (width, height, uv1, found, clip, density, uses_mesh_uv1) = match (mesh_uv1, uv_area) {
+        (Some(uv1), Some(uv_area)) => {
+            // Square texture whose texels cover the mesh at the asked density.
+            let side = (world_area / uv_area).sqrt() * settings.texels_per_metre;
+            let side = ((side.ceil() as u32).div_ceil(4) * 4).clamp(4, settings.max_size.max(4));
+            let found = charts::coplanar_charts(positions, normals);
+            let clip = vec![[0, 0, side, side]; uv1.len()];
+            let density = side as f32 * (uv_area / world_area).sqrt();
+            (side, side, uv1.to_vec(), found, clip, density, true)
+        }
+        _ => {
+            let atlas = charts::generate_atlas(
+                positions,
+                normals,
+                settings.texels_per_metre,
+                settings.gutter,
+                settings.max_size,
+            );
+            let clip = atlas
+                .charts
+                .chart
+                .iter()
+                .map(|&c| atlas.chart_texels[c as usize])
+                .collect();
+            (
+                atlas.width,
+                atlas.height,
+                atlas.uv1,
+                atlas.charts,
+                clip,
+                atlas.texels_per_metre,
+                false,
+            )
+        }
+    };
+    let (owner, sample_uv) = rasterise(&uv1, &clip, width, height, start as u32);
+    BuiltInstance {
+        map: InstanceMap {
+            width,
+            height,
+            offset: 0,
+            uses_mesh_uv1,
+            texels_per_metre: density,
+        },
+        uv1,
+        chart: found.chart,
+        chart_count: found.count,
+        owner,
+        sample_uv,
+    }
+}
+
+/// Total UV area of a mesh's TEXCOORD_1 if it can address a texture: finite, inside
+/// [0, 1]² (within a texel-sized tolerance; clamp-to-edge makes anything outside
+/// meaningless) and of positive area. Overlapping islands are the mesh's business.
+fn usable_uv1_area(uv1: &[[Vec2; 3]]) -> Option<f32> {
+    let inside = |p: &Vec2| {
+        p.is_finite() && p.cmpge(Vec2::splat(-1e-3)).all() && p.cmple(Vec2::splat(1.001)).all()
+    };
+    if !uv1.iter().flatten().all(inside) {
+        return None;
+    }
+    let area: f32 = uv1
+        .iter()
+        .map(|[a, b, c]| 0.5 * (*b - *a).perp_dot(*c - *a).abs())
+        .sum();
+    (area > 1e-12).then_some(area)
+}
+
+/// Calls `f(x, y)` for every texel of the rectangle `clip` (x, y, width, height) whose
+/// square overlaps the triangle `corners` (texel units) in more than a sliver
+/// ([`TEXEL_EPSILON`]): conservative rasterisation (Hasselgren, Akenine-Möller & Ohlsson,
+/// "Conservative Rasterization", GPU Gems 2, ch. 42), decided per texel by the separating
+/// axis test of a triangle and a box (Akenine-Möller 2001: the box axes, then each edge
+/// normal against the box corner farthest along it). A triangle that overlaps no texel
+/// that much still gets the texel holding its centroid. Degenerate triangles get none.
+pub fn conservative_texels(corners: [Vec2; 3], clip: [u32; 4], mut f: impl FnMut(u32, u32)) {
+    let [a, b, c] = corners;
+    let twice_area = (b - a).perp_dot(c - a);
+    if !(twice_area.is_finite() && twice_area != 0.0) || clip[2] == 0 || clip[3] == 0 {
+        return;
+    }
+    let sign = twice_area.signum();
+    // Inward edge normals (the interior is left of counter-clockwise edges).
+    let edges = [(a, b), (b, c), (c, a)].map(|(p, q)| (p, (q - p).perp() * sign));
+    let lo = a.min(b).min(c);
+    let hi = a.max(b).max(c);
+    let (cx1, cy1) = (clip[0] + clip[2] - 1, clip[1] + clip[3] - 1);
+    let x0 = (lo.x.floor().max(0.0) as u32).clamp(clip[0], cx1);
+    let y0 = (lo.y.floor().max(0.0) as u32).clamp(clip[1], cy1);
+    let x1 = ((hi.x.ceil() - 1.0).max(0.0) as u32).clamp(clip[0], cx1);
+    let y1 = ((hi.y.ceil() - 1.0).max(0.0) as u32).clamp(clip[1], cy1);
+    let mut any = false;
+    for y in y0..=y1 {
+        let yf = y as f32;
+        if yf + 1.0 - lo.y <= TEXEL_EPSILON || hi.y - yf <= TEXEL_EPSILON {
+            continue;
+        }
+        for x in x0..=x1 {
+            let xf = x as f32;
+            if xf + 1.0 - lo.x <= TEXEL_EPSILON || hi.x - xf <= TEXEL_EPSILON {
+                continue;
+            }
+            let separated = edges.iter().any(|&(p, n)| {
+                let reach = n.dot(Vec2::new(xf, yf) - p) + n.x.max(0.0) + n.y.max(0.0);
+                reach <= TEXEL_EPSILON * n.length()
+            });
+            if !separated {
+                any = true;
+                f(x, y);
+            }
+        }
+    }
+    if !any {
+        let centroid = (a + b + c) / 3.0;
+        let x = (centroid.x.floor().max(0.0) as u32).clamp(clip[0], cx1);
+        let y = (centroid.y.floor().max(0.0) as u32).clamp(clip[1], cy1);
+        f(x, y);
+    }
+}
+
+/// Texel owners and sample barycentrics of one instance's texture: every triangle's
+/// conservative footprint ([`conservative_texels`], limited to its `clip` rectangle)
+/// competes for its texels by the distance from the texel centre to the triangle (zero
+/// when it contains the centre; ties keep the lower triangle). The sample lies at the
+/// closest point (Ericson, *Real-Time Collision Detection* §5.1.5, in UV1 space), i.e.
+/// the centre when inside, with every barycentric at least [`INSIDE_MARGIN`].
+fn rasterise(
+    uv1: &[[Vec2; 3]],
+    clip: &[[u32; 4]],
+    width: u32,
+    height: u32,
+    first_triangle: u32,
+) -> (Vec<u32>, Vec<Vec2>) {
+    let n = (width * height) as usize;
+    let mut owner = vec![NONE; n];
+    let mut sample_uv = vec![Vec2::ZERO; n];
+    let mut best = vec![f32::INFINITY; n];
+    let size = Vec2::new(width as f32, height as f32);
+    for (t, (corners, clip)) in uv1.iter().zip(clip).enumerate() {
+        let [a, b, c] = corners.map(|p| (p * size).extend(0.0));
+        conservative_texels(corners.map(|p| p * size), *clip, |x, y| {
+            let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5).extend(0.0);
+            let uv = closest_point_barycentric(centre, a, b, c);
+            let d = (interpolate(a, b, c, uv) - centre).length_squared();
+            let k = (y * width + x) as usize;
+            if d < best[k] {
+                best[k] = d;
+                owner[k] = first_triangle + t as u32;
+                sample_uv[k] = uv;
+            }
+        });
+    }
+    for uv in &mut sample_uv {
+        let w = 1.0 - uv.x - uv.y;
+        if uv.min_element().min(w) < INSIDE_MARGIN {
+            // Shrink the triangle towards its centroid so every coordinate is ≥ the margin.
+            *uv = *uv * (1.0 - 3.0 * INSIDE_MARGIN) + Vec2::splat(INSIDE_MARGIN);
+        }
+    }
+    (owner, sample_uv)
+}
+
+/// The random-stream key of a texel: its owner's stable key, the side and the texel
+/// coordinates, so that results never depend on scheduling.
+fn texel_key(triangle_key: u64, layer: usize, x: u32, y: u32) -> u64 {
+    splitmix64(triangle_key ^ splitmix64(((layer as u64) << 62) | ((x as u64) << 31) | y as u64))
+}
+
+/// The up-to-8 neighbours of texel `k` of a `w × h` image.
+#[inline]
+fn neighbours(k: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
+    let (x, y) = ((k % w) as isize, (k / w) as isize);
+    (-1isize..=1)
+        .flat_map(move |dy| (-1isize..=1).map(move |dx| (x + dx, y + dy)))
+        .filter(move |&(i, j)| {
+            (i, j) != (x, y) && i >= 0 && j >= 0 && (i as usize) < w && (j as usize) < h
+        })
+        .map(move |(i, j)| j as usize * w + i as usize)
+}
+
+/// Refills buried texels of one texture from valid 8-neighbours by iterative averaging
+/// (a Jacobi-style flood fill: each pass sets every buried texel that touches a valid one
+/// to the mean of those, which then count as valid), preferring neighbours of the same
+/// chart; only when no buried texel has such a neighbour does a pass take any valid
+/// neighbour. Buried texels that no valid texel reaches keep their own estimate.
+fn fill_buried(values: &mut [Vec3], state: &mut [u8], chart: &[u32], w: usize, h: usize) {
+    let mut pending: Vec<usize> = (0..values.len()).filter(|&k| state[k] == BURIED).collect();
+    let mut updates: Vec<(usize, Vec3)> = Vec::new();
+    let mut any_chart = false;
+    while !pending.is_empty() {
+        updates.clear();
+        for &k in &pending {
+            let (mut sum, mut count) = (Vec3::ZERO, 0u32);
+            for j in neighbours(k, w, h) {
+                if state[j] == VALID && (any_chart || chart[j] == chart[k]) {
+                    sum += values[j];
+                    count += 1;
+                }
+            }
+            if count > 0 {
+                updates.push((k, sum / count as f32));
+            }
+        }
+        if updates.is_empty() {
+            if any_chart {
+                break;
+            }
+            any_chart = true;
+            continue;
+        }
+        any_chart = false;
+        for &(k, v) in &updates {
+            values[k] = v;
+            state[k] = VALID;
+        }
+        pending.retain(|&k| state[k] == BURIED);
+    }
+}
+
+/// Dilation: `passes` times, every texel no triangle owns that touches a set texel takes
+/// the mean of its set 8-neighbours and becomes set (texels beyond stay black). Returns
+/// how many texels were filled.
+fn dilate(values: &mut [Vec3], state: &mut [u8], w: usize, h: usize, passes: u32) -> u64 {
+    let mut filled = 0;
+    let mut updates: Vec<(usize, Vec3)> = Vec::new();
+    for _ in 0..passes {
+        updates.clear();
+        for k in (0..values.len()).filter(|&k| state[k] == EMPTY) {
+            let (mut sum, mut count) = (Vec3::ZERO, 0u32);
+            for j in neighbours(k, w, h) {
+                if state[j] != EMPTY {
+                    sum += values[j];
+                    count += 1;
+                }
+            }
+            if count > 0 {
+                updates.push((k, sum / count as f32));
+            }
+        }
+        if updates.is_empty() {
+            break;
+        }
+        for &(k, v) in &updates {
+            values[k] = v;
+            state[k] = VALID;
+        }
+        filled += updates.len() as u64;
+    }
+    filled
+}
+
+/// Bilinear lookup with clamp-to-edge in RGB9E5 texels, arithmetic identical to
+/// [`crate::texture::bilinear`] on the unpacked image (what the GPU sampler computes).
+#[inline]
+fn bilinear_packed(texels: &[u32], width: u32, height: u32, uv: Vec2, scale: Rgb9e5Scale) -> Vec3 {
+    let x = (uv.x * width as f32 - 0.5).clamp(0.0, (width - 1) as f32);
+    let y = (uv.y * height as f32 - 0.5).clamp(0.0, (height - 1) as f32);
+    let (x0, y0) = (x.floor() as u32, y.floor() as u32);
+    let (x1, y1) = ((x0 + 1).min(width - 1), (y0 + 1).min(height - 1));
+    let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+    let t = |i: u32, j: u32| scale.unpack(texels[(j * width + i) as usize]);
+    let top = t(x0, y0) * (1.0 - fx) + t(x1, y0) * fx;
+    let bottom = t(x0, y1) * (1.0 - fx) + t(x1, y1) * fx;
+    top * (1.0 - fy) + bottom * fy
+}
+
+impl SurfaceCache for Lightmaps {
+    fn method(&self) -> Method {
+        Method::Lightmap
+    }
+
+    /// The only round: every owned texel of every layer, instance by instance, row-major.
+    fn next_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>) {
+        if self.emitted {
+            return;
+        }
+        self.emitted = true;
+        self.slots.clear();
+        for layer in 0..self.layers {
+            for m in &self.maps {
+                for k in 0..m.texels() {
+                    let i = m.offset + k;
+                    let triangle = self.owner[i];
+                    if triangle == NONE {
+                        continue;
+                    }
+                    let (x, y) = (k as u32 % m.width, k as u32 / m.width);
+                    points.push(SamplePoint {
+                        site: SampleSite::Surface {
+                            triangle,
+                            uv: self.sample_uv[i],
+                            front: layer == 0,
+                        },
+                        key: texel_key(scene.triangle_key(triangle), layer, x, y),
+                    });
+                    self.slots.push((layer * self.layer_texels + i) as u32);
+                }
+            }
+        }
+    }
+
+    /// Stores the estimates, refills buried texels, dilates into the gutters and packs
+    /// everything to RGB9E5.
+    fn finish_round(
+        &mut self,
+        _scene: &TracedScene,
+        points: &[SamplePoint],
+        estimates: &[Estimate],
+    ) {
+        debug_assert_eq!(points.len(), self.slots.len());
+        let total = self.layers * self.layer_texels;
+        let mut values = vec![Vec3::ZERO; total];
+        let mut state = vec![EMPTY; total];
+        let mut stats = CacheStats::default();
+        let mut rel_error = 0.0f64;
+        for (&slot, e) in self.slots.iter().zip(estimates) {
+            let slot = slot as usize;
+            values[slot] = e.value;
+            state[slot] = if e.back_face_share > self.settings.buried_threshold {
+                stats.buried += 1;
+                BURIED
+            } else {
+                VALID
+            };
+            stats.samples += e.samples as u64;
+            stats.max_samples_per_point = stats.max_samples_per_point.max(e.samples);
+            rel_error += e.rel_error as f64;
+        }
+        stats.sample_points = estimates.len() as u64;
+        stats.mean_rel_error = rel_error / estimates.len().max(1) as f64;
+        // Chart of each texel of a layer (for the same-chart preference of the fill).
+        let texel_chart: Vec<u32> = self
+            .owner
+            .iter()
+            .map(|&t| {
+                if t == NONE {
+                    NONE
+                } else {
+                    self.chart[t as usize]
+                }
+            })
+            .collect();
+        for layer in 0..self.layers {
+            for m in &self.maps {
+                let range = layer * self.layer_texels + m.offset
+                    ..layer * self.layer_texels + m.offset + m.texels();
+                let (w, h) = (m.width as usize, m.height as usize);
+                let chart = &texel_chart[m.offset..m.offset + m.texels()];
+                fill_buried(
+                    &mut values[range.clone()],
+                    &mut state[range.clone()],
+                    chart,
+                    w,
+                    h,
+                );
+                stats.dilated_texels += dilate(
+                    &mut values[range.clone()],
+                    &mut state[range],
+                    w,
+                    h,
+                    self.settings.gutter,
+                );
+            }
+        }
+        let max = values
+            .iter()
+            .map(|v| v.max_element())
+            .fold(0.0f32, f32::max);
+        self.scale = Rgb9e5Scale::for_max(max);
+        self.packed = values.iter().map(|&v| self.scale.pack(v)).collect();
+        // UV1: three f32 pairs per triangle corner (a generated layout needs a vertex per
+        // corner); the per-triangle instance index is the engine's mesh binding.
+        stats.cache_bytes = 4 * total as u64 + 24 * self.uv1.len() as u64;
+        self.stats = stats;
+        self.owner = Vec::new();
+        self.sample_uv = Vec::new();
+        self.slots = Vec::new();
+    }
+
+    /// Bilinear sample of the side's texture at the triangle's interpolated UV1. A back
+    /// side that was not baked (`both_sides` off) is NaN.
+    fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
+        let layer = match (front, self.layers) {
+            (true, _) => 0,
+            (false, 2) => 1,
+            _ => return Vec3::NAN,
+        };
+        let t = triangle as usize;
+        let instance = self.triangle_instance[t] as usize;
+        let m = &self.maps[instance];
+        let [a, b, c] = self.uv1[t];
+        bilinear_packed(
+            self.texture_slice(layer, instance),
+            m.width,
+            m.height,
+            interpolate(a, b, c, uv),
+            self.scale,
+        )
+    }
+
+    fn stats(&self) -> CacheStats {
+        self.stats.clone()
+    }
+
+    /// One texture per instance for the front side, and one for the back side of
+    /// instances with a double-sided material (when baked); UV1 in mesh order.
+    fn publish(&self, scene: &TracedScene) -> Vec<IrradianceTexture> {
+        let mut out = Vec::new();
+        for (i, m) in self.maps.iter().enumerate() {
+            let range = scene.instance_triangles[i].clone();
+            let mesh_triangles = range
+                .clone()
+                .map(|t| scene.local_triangle[t as usize] + 1)
+                .max()
+                .unwrap_or(0);
+            let mut uv1 = vec![[Vec2::ZERO; 3]; mesh_triangles as usize];
+            for t in range.clone() {
+                let [a, b, c] = self.uv1[t as usize];
+                // Traced corners B and C are the mesh's C and B under a mirroring transform.
+                uv1[scene.local_triangle[t as usize] as usize] = if scene.mirrored[i] {
+                    [a, c, b]
+                } else {
+                    [a, b, c]
+                };
+            }
+            let double_sided = !range.is_empty() && scene.material_of(range.start).double_sided;
+            for layer in 0..self.layers {
+                if layer == 1 && !double_sided {
+                    continue;
+                }
+                out.push(IrradianceTexture {
+                    instance: i as u32,
+                    name: scene.instance_names[i].clone(),
+                    front: layer == 0,
+                    width: m.width,
+                    height: m.height,
+                    texels: self
+                        .texture_slice(layer, i)
+                        .iter()
+                        .map(|&v| self.scale.unpack(v))
+                        .collect(),
+                    uv1: uv1.clone(),
+                    uses_mesh_uv1: m.uses_mesh_uv1,
+                    uv_rect: [0.0, 0.0, 1.0, 1.0],
+                });
+            }
+        }
+        out
+    }
+}
