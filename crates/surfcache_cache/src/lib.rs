@@ -30,7 +30,10 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use surfcache_trace::{Estimate, TracedScene};
 
+pub use irradiance_map::{IrradianceMapSettings, IrradianceMaps};
+pub use lightmap::{LightmapSettings, Lightmaps};
 pub use texture::IrradianceTexture;
+pub use vertex_lighting::{VertexLighting, VertexLightingSettings};
 
 /// Which cache to bake.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -135,4 +138,143 @@ pub trait SurfaceCache: Send + Sync {
     /// Irradiance textures with their UV1 layout: the front side of every instance, and
     /// the back side of instances with a double-sided material.
     fn publish(&self, scene: &TracedScene) -> Vec<IrradianceTexture>;
+
+    /// Sample count (and irradiance-map order) behind the value at a point, for the
+    /// thesis' diagnostic pictures.
+    fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic;
+}
+
+/// What a cache knows about one surface point, for diagnostic pictures.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Diagnostic {
+    /// Hemisphere samples of the nearest sample point.
+    pub samples: u32,
+    /// Irradiance maps: the order of the point's grid.
+    pub order: Option<u32>,
+}
+
+/// Settings of the cache to bake, one variant per [`Method`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "method", rename_all = "kebab-case")]
+pub enum CacheSettings {
+    Vertex(VertexLightingSettings),
+    IrradianceMap(IrradianceMapSettings),
+    Lightmap(LightmapSettings),
+}
+
+impl CacheSettings {
+    /// The defaults of `method`.
+    pub fn for_method(method: Method) -> Self {
+        match method {
+            Method::Vertex => Self::Vertex(Default::default()),
+            Method::IrradianceMap => Self::IrradianceMap(Default::default()),
+            Method::Lightmap => Self::Lightmap(Default::default()),
+        }
+    }
+
+    pub fn method(&self) -> Method {
+        match self {
+            Self::Vertex(_) => Method::Vertex,
+            Self::IrradianceMap(_) => Method::IrradianceMap,
+            Self::Lightmap(_) => Method::Lightmap,
+        }
+    }
+
+    /// Bake both sides of every surface, or the front (and double-sided back) only.
+    pub fn set_both_sides(&mut self, both: bool) {
+        match self {
+            Self::Vertex(s) => s.both_sides = both,
+            Self::IrradianceMap(s) => s.both_sides = both,
+            Self::Lightmap(s) => s.both_sides = both,
+        }
+    }
+
+    /// Spatial density: irradiance-map samples per metre, lightmap texels per metre
+    /// (vertex lighting has none; ignored).
+    pub fn set_density(&mut self, density: f32) {
+        match self {
+            Self::Vertex(_) => {}
+            Self::IrradianceMap(s) => s.density = density,
+            Self::Lightmap(s) => s.texels_per_metre = density,
+        }
+    }
+
+    /// The irradiance-map refinement bound (ignored by the other caches).
+    pub fn set_interpolation_error(&mut self, bound: f32) {
+        if let Self::IrradianceMap(s) = self {
+            s.interpolation_error = bound;
+        }
+    }
+
+    /// The absolute floor ε of relative errors, W/m² (the estimator's).
+    pub fn set_floor(&mut self, floor: f32) {
+        if let Self::IrradianceMap(s) = self {
+            s.floor = floor;
+        }
+    }
+}
+
+/// One of the three caches, chosen at run time; stored in bake archives.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub enum Cache {
+    Vertex(VertexLighting),
+    IrradianceMap(IrradianceMaps),
+    Lightmap(Lightmaps),
+}
+
+impl Cache {
+    /// An empty cache of the kind `settings` names, laid out over `scene`'s triangles.
+    pub fn new(scene: &TracedScene, settings: &CacheSettings) -> Self {
+        match *settings {
+            CacheSettings::Vertex(s) => Self::Vertex(VertexLighting::new(scene, s)),
+            CacheSettings::IrradianceMap(s) => Self::IrradianceMap(IrradianceMaps::new(scene, s)),
+            CacheSettings::Lightmap(s) => Self::Lightmap(Lightmaps::new(scene, s)),
+        }
+    }
+
+    fn inner(&self) -> &dyn SurfaceCache {
+        match self {
+            Self::Vertex(c) => c,
+            Self::IrradianceMap(c) => c,
+            Self::Lightmap(c) => c,
+        }
+    }
+
+    fn inner_mut(&mut self) -> &mut dyn SurfaceCache {
+        match self {
+            Self::Vertex(c) => c,
+            Self::IrradianceMap(c) => c,
+            Self::Lightmap(c) => c,
+        }
+    }
+}
+
+impl SurfaceCache for Cache {
+    fn method(&self) -> Method {
+        self.inner().method()
+    }
+
+    fn next_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>) {
+        self.inner_mut().next_round(scene, points)
+    }
+
+    fn finish_round(&mut self, scene: &TracedScene, points: &[SamplePoint], estimates: &[Estimate]) {
+        self.inner_mut().finish_round(scene, points, estimates)
+    }
+
+    fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> glam::Vec3 {
+        self.inner().lookup(triangle, uv, front)
+    }
+
+    fn stats(&self) -> CacheStats {
+        self.inner().stats()
+    }
+
+    fn publish(&self, scene: &TracedScene) -> Vec<IrradianceTexture> {
+        self.inner().publish(scene)
+    }
+
+    fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic {
+        self.inner().diagnostic(triangle, uv, front)
+    }
 }

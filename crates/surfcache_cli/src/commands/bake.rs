@@ -99,18 +99,18 @@ pub fn run(args: BakeArgs) -> Result<()> {
         other => bail!("unknown --sides '{other}' (known: both, front)"),
     };
     let mut cache_settings = CacheSettings::for_method(method);
-    cache_settings.both_sides = both_sides;
+    cache_settings.set_both_sides(both_sides);
     if let Some(d) = args.density {
         if !(d.is_finite() && d > 0.0) {
             bail!("--density must be a positive number");
         }
-        cache_settings.density = d;
+        cache_settings.set_density(d);
     }
     if let Some(e) = args.interpolation_error {
         if !(e.is_finite() && e > 0.0) {
             bail!("--interpolation-error must be a positive number");
         }
-        cache_settings.interpolation_error = e;
+        cache_settings.set_interpolation_error(e);
     }
     let staging = StagingDir::create(&args.out)?;
 
@@ -136,8 +136,8 @@ pub fn run(args: BakeArgs) -> Result<()> {
             floor,
             max_bounces: args.bounces,
         };
-        cache_settings.floor = floor;
-        let cache = Cache::new(&scene, method, &cache_settings);
+        cache_settings.set_floor(floor);
+        let cache = Cache::new(&scene, &cache_settings);
         let bar = ProgressBar::new_spinner().with_style(
             ProgressStyle::with_template(
                 "bake {spinner} round {msg} [{elapsed_precise}]",
