@@ -1,6 +1,7 @@
 //! Measurement, not a test: bakes the built-in Cornell box with irradiance maps (and
 //! vertex lighting for comparison) on 2 threads with the CLI's estimator settings and
-//! prints time, sample points, order histogram, bytes and the error against a fixed-sample
+//! prints wall and CPU time (the machine may be shared: CPU seconds / 2 is the time an
+//! idle machine would take), rays, sample points, order histogram, bytes and the error against a fixed-sample
 //! reference at 256 random points. Run by hand:
 //!
 //! ```text
@@ -16,12 +17,42 @@ use common::Points;
 use std::time::Instant;
 use surfcache_cache::{
     SurfaceCache,
-    bake::{FLOOR_FRACTION, bake_to_convergence, mean_irradiance},
+    bake::{Baker, FLOOR_FRACTION, mean_irradiance},
     irradiance_map::{IrradianceMapSettings, IrradianceMaps},
     vertex_lighting::{VertexLighting, VertexLightingSettings},
 };
 use surfcache_core::{color::luminance, scenes::cornell};
 use surfcache_trace::{EstimatorSettings, Sampler, TracedScene, estimate};
+
+/// CPU seconds of this process so far (user + system, from /proc/self/stat): robust to
+/// other work on the machine, unlike wall time.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let after = stat.rsplit(')').next().unwrap_or("");
+    let fields: Vec<&str> = after.split_whitespace().collect();
+    let ticks = |k: usize| {
+        fields
+            .get(k)
+            .and_then(|f| f.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
+    // Fields 14 and 15 (utime, stime) of proc(5), counted from the state field (3).
+    (ticks(11) + ticks(12)) / 100.0
+}
+
+/// Bakes to convergence; returns the cache, wall seconds, CPU seconds and rays.
+fn timed_bake<C: SurfaceCache>(
+    traced: &TracedScene,
+    cache: C,
+    settings: &EstimatorSettings,
+) -> (C, f64, f64, u64) {
+    let (wall, cpu) = (Instant::now(), cpu_seconds());
+    let mut baker = Baker::new(cache, *settings, 0);
+    while !baker.step(traced, 4096) {}
+    let rays = baker.progress().rays;
+    let cpu = cpu_seconds() - cpu;
+    (baker.into_cache(), wall.elapsed().as_secs_f64(), cpu, rays)
+}
 
 fn list<T: std::str::FromStr>(name: &str, default: &str) -> Vec<T> {
     std::env::var(name)
@@ -119,11 +150,12 @@ fn measure_cornell() {
             }
             (sum / count as f64).sqrt()
         };
-        let report = |name: &str, seconds: f64, cache: &dyn SurfaceCache| {
+        let report = |name: &str, (wall, cpu, rays): (f64, f64, u64), cache: &dyn SurfaceCache| {
             let s = cache.stats();
             eprintln!(
-                "{name}: {seconds:.1} s, {} points, {} samples ({:.0}/point, max {}), {} bytes \
+                "{name}: {wall:.1} s wall, {cpu:.1} s CPU, {:.1} Mrays, {} points, {} samples ({:.0}/point, max {}), {} bytes \
                  ({:.1} KiB), buried {}, mean C {:.4}, rel. RMS error {:.4}, orders {:?}",
+                rays as f64 * 1e-6,
                 s.sample_points,
                 s.samples,
                 s.samples as f64 / s.sample_points.max(1) as f64,
@@ -137,10 +169,9 @@ fn measure_cornell() {
             );
         };
         if std::env::var("IMAP_VERTEX").is_ok() {
-            let started = Instant::now();
             let vertex = VertexLighting::new(&traced, VertexLightingSettings::default());
-            let vertex = bake_to_convergence(&traced, vertex, &settings, 0);
-            report("vertex", started.elapsed().as_secs_f64(), &vertex);
+            let (vertex, wall, cpu, rays) = timed_bake(&traced, vertex, &settings);
+            report("vertex", (wall, cpu, rays), &vertex);
         }
         for &density in &list::<f32>("IMAP_DENSITY", "32") {
             for &interpolation_error in &list::<f32>("IMAP_ERROR", "0.05") {
@@ -154,14 +185,13 @@ fn measure_cornell() {
                             floor,
                             ..Default::default()
                         };
-                        let started = Instant::now();
                         let maps = IrradianceMaps::new(&traced, map_settings);
-                        let maps = bake_to_convergence(&traced, maps, &settings, 0);
+                        let (maps, wall, cpu, rays) = timed_bake(&traced, maps, &settings);
                         let name = format!(
                             "maps density {density} error {interpolation_error} max order \
                              {max_order} both sides {both_sides}"
                         );
-                        report(&name, started.elapsed().as_secs_f64(), &maps);
+                        report(&name, (wall, cpu, rays), &maps);
                     }
                 }
             }
