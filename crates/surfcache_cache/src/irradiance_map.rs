@@ -74,7 +74,7 @@
 //! ```
 
 use crate::{
-    CacheStats, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache, mesh_colour,
+    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache, mesh_colour,
     rgb9e5::Rgb9e5Scale,
 };
 use glam::{Vec2, Vec3};
@@ -286,8 +286,9 @@ struct Working {
     pending: Vec<u32>,
     /// Number of points the current round asked for.
     pending_points: usize,
-    /// Raw estimates E and their standard errors.
+    /// Raw estimates E, their sample counts and standard errors.
     raw: Vec<Vec3>,
+    samples: Vec<u32>,
     std_error: Vec<Vec3>,
     /// Values after burial filling, and their standard errors.
     filled: Vec<Vec3>,
@@ -306,6 +307,10 @@ pub struct IrradianceMaps {
     offsets: Vec<u32>,
     /// RGB9E5 samples, grid by grid, each in [`grid_index`] order.
     packed: Vec<u32>,
+    /// Hemisphere samples behind each stored sample (diagnostics only; not part of
+    /// `cache_bytes`).
+    #[serde(default)]
+    sample_counts: Vec<u32>,
     scale: Rgb9e5Scale,
     totals: EstimateTotals,
     buried: u64,
@@ -339,6 +344,7 @@ impl IrradianceMaps {
             log2_orders: vec![0; 2 * triangles],
             offsets: vec![0; 2 * triangles],
             packed: Vec::new(),
+            sample_counts: Vec::new(),
             scale: Rgb9e5Scale::default(),
             totals: EstimateTotals::default(),
             buried: 0,
@@ -541,6 +547,7 @@ impl SurfaceCache for IrradianceMaps {
         }
         // Move the old samples to their places in the doubled grids.
         let mut raw = vec![Vec3::ZERO; total];
+        let mut samples = vec![0u32; total];
         let mut std_error = vec![Vec3::ZERO; total];
         let mut burial = vec![VALID; total];
         for g in 0..slots {
@@ -552,6 +559,7 @@ impl SurfaceCache for IrradianceMaps {
             if old == new {
                 let s = grid_size(old);
                 raw[to..to + s].copy_from_slice(&w.raw[from..from + s]);
+                samples[to..to + s].copy_from_slice(&w.samples[from..from + s]);
                 std_error[to..to + s].copy_from_slice(&w.std_error[from..from + s]);
                 burial[to..to + s].copy_from_slice(&w.burial[from..from + s]);
             } else {
@@ -560,6 +568,7 @@ impl SurfaceCache for IrradianceMaps {
                         let i = d - j;
                         let (a, b) = (from + grid_index(i, j), to + grid_index(2 * i, 2 * j));
                         raw[b] = w.raw[a];
+                        samples[b] = w.samples[a];
                         std_error[b] = w.std_error[a];
                         burial[b] = if w.burial[a] == VALID { VALID } else { BURIED };
                     }
@@ -577,6 +586,7 @@ impl SurfaceCache for IrradianceMaps {
                 let e = &estimates[next];
                 next += 1;
                 raw[base + m] = e.value;
+                samples[base + m] = e.samples;
                 std_error[base + m] = e.std_error;
                 burial[base + m] = if e.back_face_share > threshold {
                     BURIED
@@ -589,6 +599,7 @@ impl SurfaceCache for IrradianceMaps {
         self.log2_orders = new_log2;
         self.offsets = offsets;
         w.raw = raw;
+        w.samples = samples;
         w.std_error = std_error;
         w.burial = burial;
         // Fill buried samples (every grid: cheap, and independent of history).
@@ -619,6 +630,7 @@ impl SurfaceCache for IrradianceMaps {
         self.packed.clear();
         self.packed
             .extend(w.filled.iter().map(|&v| self.scale.pack(v)));
+        self.sample_counts.clone_from(&w.samples);
         self.working = Some(w);
     }
 
@@ -633,6 +645,25 @@ impl SurfaceCache for IrradianceMaps {
         grid_interpolate(1 << l, uv, |i, j| {
             self.scale.unpack(packed[grid_index(i, j)])
         })
+    }
+
+    fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic {
+        let g = Self::slot(triangle, front);
+        let n = self.order(triangle, front);
+        if n == 0 {
+            return Diagnostic::default();
+        }
+        // The nearest grid sample.
+        let p = (uv.clamp(Vec2::ZERO, Vec2::ONE) * n as f32).round();
+        let (mut i, mut j) = (p.x as u32, p.y as u32);
+        if i + j > n {
+            if i > j { i -= 1 } else { j -= 1 }
+        }
+        let k = self.offsets[g] as usize + grid_index(i.min(n), j.min(n - i.min(n)));
+        Diagnostic {
+            samples: self.sample_counts.get(k).copied().unwrap_or(0),
+            order: Some(n),
+        }
     }
 
     fn stats(&self) -> CacheStats {

@@ -25,7 +25,7 @@
 //! barycentric interpolation exactly.
 
 use crate::{
-    CacheStats, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
+    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
     irradiance_map::EstimateTotals, mesh_colour, rgb9e5::Rgb9e5Scale,
 };
 use glam::{Vec2, Vec3};
@@ -67,6 +67,9 @@ pub struct VertexLighting {
     corners: Vec<[u32; 3]>,
     /// RGB9E5 irradiance per vertex slot `2·vertex + side` (side 0 = front).
     packed: Vec<u32>,
+    /// Hemisphere samples per vertex slot (diagnostics only).
+    #[serde(default)]
+    sample_counts: Vec<u32>,
     scale: Rgb9e5Scale,
     totals: EstimateTotals,
     buried: u64,
@@ -108,6 +111,7 @@ impl VertexLighting {
             settings,
             corners,
             packed: vec![0; 2 * next as usize],
+            sample_counts: vec![0; 2 * next as usize],
             scale: Rgb9e5Scale::default(),
             totals: EstimateTotals::default(),
             buried: 0,
@@ -190,6 +194,7 @@ impl SurfaceCache for VertexLighting {
             };
             let v = self.corners[triangle as usize][corner as usize] as usize;
             values[2 * v + (!front) as usize] = e.value;
+            self.sample_counts[2 * v + (!front) as usize] = e.samples;
             self.totals.add(e);
             self.buried += (e.back_face_share > BURIED_THRESHOLD) as u64;
         }
@@ -204,6 +209,17 @@ impl SurfaceCache for VertexLighting {
     fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
         let [a, b, c] = [0, 1, 2].map(|k| self.corner_value(triangle, k, front));
         interpolate(a, b, c, uv)
+    }
+
+    fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic {
+        // The nearest corner.
+        let w = [1.0 - uv.x - uv.y, uv.x, uv.y];
+        let k = (0..3).fold(0, |best, k| if w[k] > w[best] { k } else { best });
+        let v = self.corners[triangle as usize][k] as usize;
+        Diagnostic {
+            samples: self.sample_counts[2 * v + (!front) as usize],
+            order: None,
+        }
     }
 
     fn stats(&self) -> CacheStats {

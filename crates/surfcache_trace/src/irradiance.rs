@@ -2,7 +2,7 @@
 //! with a selectable sampler and the thesis' adaptive stopping rule (DESIGN.md §2).
 
 use crate::{
-    path_tracer::{FirstHit, PathOptions, PathSample},
+    path_tracer::{FirstHit, IrradianceLookup, PathOptions, PathSample},
     traced_scene::{SurfacePoint, TracedScene},
 };
 use glam::{DVec3, Vec2, Vec3};
@@ -217,6 +217,7 @@ pub fn hemisphere_sample(
     root: [f32; 5],
     rng: &mut Rng,
     options: PathOptions,
+    gather: Option<&dyn IrradianceLookup>,
 ) -> (Vec3, PathSample) {
     let u = Vec2::new(root[0], root[1]);
     let mut x = Vec3::ZERO;
@@ -244,7 +245,7 @@ pub fn hemisphere_sample(
         };
         return (x, path);
     }
-    let mut path = scene.incident_radiance(origin, w, Some(pdf), rng, options);
+    let mut path = scene.incident_radiance(origin, w, Some(pdf), rng, options, gather);
     path.rays += rays;
     (x + path.radiance * weight, path)
 }
@@ -257,6 +258,9 @@ pub fn hemisphere_sample(
 /// result does not depend on threads, batching or frames. Pseudo-random samplers take
 /// the standard error from single samples (the thesis' formula); quasi-random ones from
 /// the spread of [`QMC_REPLICATES`] independently scrambled replicates.
+///
+/// With `gather`, paths end at their first hit with the lookup's irradiance there (final
+/// gathering, see [`IrradianceLookup`]); without, they are traced to the end.
 pub fn estimate(
     scene: &TracedScene,
     p: &SurfacePoint,
@@ -264,6 +268,7 @@ pub fn estimate(
     settings: &EstimatorSettings,
     seed: u64,
     key: u64,
+    gather: Option<&dyn IrradianceLookup>,
 ) -> Estimate {
     let options = settings.path_options();
     let sampler = settings.sampler;
@@ -298,7 +303,8 @@ pub fn estimate(
                 r.iter_mut().for_each(|v| *v = rng.next_f32());
                 r
             };
-            let (x, path) = hemisphere_sample(scene, p, origin, sampler, root, &mut rng, options);
+            let (x, path) =
+                hemisphere_sample(scene, p, origin, sampler, root, &mut rng, options, gather);
             back += (path.first_hit == FirstHit::Back) as u32;
             rays += path.rays as u64;
             if sampler.quasi_random() {
@@ -382,7 +388,7 @@ pub fn reference_irradiance(
         .map(|(i, q)| {
             let p = scene.locate(q.position, q.normal)?;
             let origin = scene.spawn_origin(&p);
-            let e = estimate(scene, &p, origin, settings, seed, i as u64);
+            let e = estimate(scene, &p, origin, settings, seed, i as u64, None);
             progress();
             Some(e)
         })

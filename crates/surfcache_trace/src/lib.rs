@@ -28,5 +28,5 @@ pub mod traced_scene;
 pub use bvh::{Bvh, Hit};
 pub use irradiance::{Estimate, EstimatorSettings, Query, Sampler, estimate, reference_irradiance};
 pub use light_sampling::LightSampler;
-pub use path_tracer::{FirstHit, PathOptions};
+pub use path_tracer::{FirstHit, IrradianceLookup, PathOptions};
 pub use traced_scene::{SurfacePoint, TracedScene};

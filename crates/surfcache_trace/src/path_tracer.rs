@@ -30,6 +30,14 @@ pub struct PathOptions {
     pub next_event: bool,
 }
 
+/// Irradiance already known on the surfaces (a coarse surface cache). With it, a path
+/// ends at its first hit y with L = L_e(y) + ρ/π · E(y): *final gathering*, which shares
+/// the cache's samples among all points that see y instead of tracing deeper bounces.
+pub trait IrradianceLookup: Sync {
+    /// E at barycentrics `uv` of `triangle` on the given side.
+    fn irradiance(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3;
+}
+
 /// What the first segment of a path met, for detecting points buried inside geometry.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum FirstHit {
@@ -162,6 +170,9 @@ impl TracedScene {
     /// weighted by the power heuristic; `direction_pdf` is the solid-angle density with
     /// which the caller drew `direction` (cosine sampling), or `None` when emission along
     /// it must be counted in full.
+    ///
+    /// With `gather`, the path ends at its first hit y, adding ρ/π · E(y) from the lookup
+    /// (its emission still counts, MIS-weighted as above).
     pub fn incident_radiance(
         &self,
         origin: Vec3,
@@ -169,6 +180,7 @@ impl TracedScene {
         direction_pdf: Option<f32>,
         rng: &mut Rng,
         options: PathOptions,
+        gather: Option<&dyn IrradianceLookup>,
     ) -> PathSample {
         let nee = options.next_event && !self.light_sampler.is_empty();
         let mut radiance = Vec3::ZERO;
@@ -213,6 +225,11 @@ impl TracedScene {
             }
             let albedo = material.albedo_at(uv0);
             if albedo == Vec3::ZERO {
+                break;
+            }
+            if let Some(cache) = gather {
+                let e = cache.irradiance(t, hit.uv, front);
+                radiance += throughput * albedo * core::f32::consts::FRAC_1_PI * e;
                 break;
             }
             let spawn = self.spawn_origin(&p);
