@@ -163,8 +163,8 @@ pub struct ChartAtlas {
     /// Texels each chart's triangles may cover: x, y, width, height (the chart's packed
     /// rectangle without its gutter).
     pub chart_texels: Vec<[u32; 4]>,
-    /// The density actually used (texels per metre), lower than asked when the atlas had
-    /// to shrink to fit.
+    /// The density asked of every chart (texels per metre), lower than the caller's when
+    /// the atlas had to shrink to fit; each chart is stretched by less than a texel more.
     pub texels_per_metre: f32,
 }
 
@@ -178,9 +178,17 @@ struct FlatChart {
 /// its plane (mean normal, basis of Duff et al. 2017), turned to its minimum-area
 /// bounding rectangle (Freeman & Shapira 1975: one side lies on a convex-hull edge),
 /// laid landscape, scaled by `texels_per_metre`, padded by `gutter` texels on every side
-/// and packed with [`pack_rectangles`]. Every chart covers at least one texel. If the
-/// atlas is wider or taller than `max_size`, the density is lowered uniformly and the
-/// layout redone (a layout whose charts are all one texel is kept even if too big).
+/// and packed with [`pack_rectangles`]. If the atlas is wider or taller than `max_size`,
+/// the density is lowered uniformly and the layout redone (a layout whose charts are all
+/// minimal is kept even if too big).
+///
+/// Chart boxes are snapped to texel centres: a chart spanning `e · density` texels is
+/// stretched to the next whole number `n ≥ 1` (at most one texel more) and placed from
+/// one texel centre to another, over `n + 1` texels. Its border texels are then
+/// estimated on the border itself and bilinear filtering interpolates linearly right up
+/// to it, instead of holding the last texel's value over the outer half texel (which
+/// loses the darkening into concave corners); filtering inside the box never reads a
+/// gutter texel.
 pub fn generate_atlas(
     positions: &[[Vec3; 3]],
     normals: &[Vec3],
@@ -201,18 +209,19 @@ pub fn generate_atlas(
         .map(|tris| flatten_chart(positions, normals, tris, &mut local))
         .collect();
     let mut density = texels_per_metre.max(f32::MIN_POSITIVE);
-    let inner = |extent: Vec2, density: f32| {
+    // Whole texel spans of a chart's box (the chart covers one texel more).
+    let spans = |extent: Vec2, density: f32| {
         let s = extent * density - TEXEL_EPSILON;
         [s.x.ceil().max(1.0) as u32, s.y.ceil().max(1.0) as u32]
     };
     let (layout, sizes) = loop {
         let sizes: Vec<[u32; 2]> = flat
             .iter()
-            .map(|f| inner(f.extent, density).map(|s| s + 2 * gutter))
+            .map(|f| spans(f.extent, density).map(|s| s + 1 + 2 * gutter))
             .collect();
         let layout = pack_rectangles(&sizes);
         let size = layout.width.max(layout.height.div_ceil(4) * 4);
-        let minimal = flat.iter().all(|f| inner(f.extent, density) == [1, 1]);
+        let minimal = flat.iter().all(|f| spans(f.extent, density) == [1, 1]);
         if size <= max_size || minimal {
             break (layout, sizes);
         }
@@ -225,9 +234,24 @@ pub fn generate_atlas(
     let mut chart_texels = Vec::with_capacity(n_charts);
     for (c, tris) in members.iter().enumerate() {
         let [ox, oy] = layout.origins[c];
-        let corner = Vec2::new((ox + gutter) as f32, (oy + gutter) as f32);
+        // The box's corner on the centre of the first texel inside the gutter.
+        let corner = Vec2::new((ox + gutter) as f32, (oy + gutter) as f32) + 0.5;
+        let extent = flat[c].extent;
+        let n = spans(extent, density);
+        let stretch = Vec2::new(
+            if extent.x > 0.0 {
+                n[0] as f32 / extent.x
+            } else {
+                density
+            },
+            if extent.y > 0.0 {
+                n[1] as f32 / extent.y
+            } else {
+                density
+            },
+        );
         for &t in tris {
-            uv1[t as usize] = local[t as usize].map(|p| (corner + p * density) * scale);
+            uv1[t as usize] = local[t as usize].map(|p| (corner + p * stretch) * scale);
         }
         let [w, h] = sizes[c];
         chart_texels.push([ox + gutter, oy + gutter, w - 2 * gutter, h - 2 * gutter]);

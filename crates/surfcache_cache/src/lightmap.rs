@@ -34,14 +34,18 @@ use surfcache_trace::{Estimate, TracedScene};
 /// How lightmaps are laid out and which texels are trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LightmapSettings {
-    /// Texels per metre along a surface (density² texels per m²). Default 64: texels of
-    /// 1.6 cm, about 35 across a Cornell-box wall.
+    /// Texels per metre along a surface (density² texels per m²). Default 32: texels of
+    /// about 3 cm, 18 across a Cornell-box wall (its bake measured about 2 % relative RMS
+    /// error against the reference at 1 % estimates, against 3.3 % at 16 and 1.4 % at 64,
+    /// which costs three times as long).
     pub texels_per_metre: f32,
     /// Largest texture side in texels; generated atlases lower their density to fit,
     /// TEXCOORD_1 textures are clamped. Default 2048.
     pub max_size: u32,
-    /// Free texels around every generated chart, filled by dilation. Default 2: bilinear
-    /// filtering reads one texel beyond a chart; the second keeps mipmap level 1 clean.
+    /// Free texels around every generated chart, filled by dilation (`gutter` passes).
+    /// Default 2: bilinear filtering inside a chart's box never reads beyond it, but
+    /// points near a slanted chart edge read unowned texels one ring out, and a second
+    /// ring keeps mipmap level 1 clean. TEXCOORD_1 layouts bring their own gutters.
     pub gutter: u32,
     /// Also bake the back side of every surface (a second layer; published for
     /// double-sided materials). Default true.
@@ -55,7 +59,7 @@ pub struct LightmapSettings {
 impl Default for LightmapSettings {
     fn default() -> Self {
         Self {
-            texels_per_metre: 64.0,
+            texels_per_metre: 32.0,
             max_size: 2048,
             gutter: 2,
             both_sides: true,

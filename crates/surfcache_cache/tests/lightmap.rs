@@ -431,7 +431,6 @@ fn generated_charts_do_not_overlap_and_cover_every_triangle() {
                 ..Default::default()
             },
         );
-        // The unit grid is one chart of 32 × 32 texels.
         assert_eq!(cache.texels_per_metre(1), density);
         for inst in 0..traced.instance_triangles.len() {
             let [w, h] = cache.texture_size(inst as u32);
@@ -501,8 +500,14 @@ fn generated_charts_do_not_overlap_and_cover_every_triangle() {
                 assert!(fb[0] >= g && fb[1] >= g && fb[2] + g < w as i64 && fb[3] + g < h as i64);
             }
             if inst == 1 {
+                // The unit grid spans 32 texels from texel centre to texel centre.
                 let fb = footprint_box[0];
-                assert_eq!((fb[2] - fb[0] + 1, fb[3] - fb[1] + 1), (32, 32));
+                assert_eq!((fb[2] - fb[0] + 1, fb[3] - fb[1] + 1), (33, 33));
+                let lo = range
+                    .clone()
+                    .flat_map(|t| cache.triangle_uv1(t))
+                    .fold(Vec2::INFINITY, |a, p| a.min(p * size));
+                assert!((lo - Vec2::splat(gutter as f32 + 0.5)).abs().max_element() < 1e-3);
             }
             // No texel centre lies inside two triangles: the charts are flat, unfolded.
             let mut inside = vec![0u8; (w * h) as usize];
