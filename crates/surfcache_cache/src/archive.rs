@@ -55,7 +55,9 @@ impl<C: Serialize + DeserializeOwned> BakeArchive<C> {
         let archive: Self =
             postcard::from_bytes(body).map_err(|e| ArchiveError::Corrupt(e.to_string()))?;
         if archive.positions.len() != archive.normals.len() {
-            return Err(ArchiveError::Corrupt("triangle arrays differ in length".into()));
+            return Err(ArchiveError::Corrupt(
+                "triangle arrays differ in length".into(),
+            ));
         }
         Ok(archive)
     }
@@ -70,7 +72,9 @@ impl<C: Serialize + DeserializeOwned> BakeArchive<C> {
             normals: self.normals.iter().flatten().copied().collect(),
             uv0: Vec::new(),
             uv1: Vec::new(),
-            indices: (0..n as u32).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect(),
+            indices: (0..n as u32)
+                .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+                .collect(),
         };
         let scene = Scene {
             name: "baked".into(),
@@ -84,7 +88,9 @@ impl<C: Serialize + DeserializeOwned> BakeArchive<C> {
         };
         let traced = TracedScene::new(&scene).map_err(|e| ArchiveError::Corrupt(e.to_string()))?;
         if traced.triangle_count() != n {
-            return Err(ArchiveError::Corrupt("degenerate triangles in the archive".into()));
+            return Err(ArchiveError::Corrupt(
+                "degenerate triangles in the archive".into(),
+            ));
         }
         Ok(traced)
     }

@@ -4,8 +4,11 @@
 use crate::{SamplePoint, SampleSite, SurfaceCache};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
+use std::sync::Arc;
 use surfcache_core::{color::luminance, sampling::Rng};
-use surfcache_trace::{Estimate, EstimatorSettings, Sampler, SurfacePoint, TracedScene, estimate};
+use surfcache_trace::{
+    Estimate, EstimatorSettings, IrradianceLookup, Sampler, SurfacePoint, TracedScene, estimate,
+};
 
 /// The relative-error floor ε is this fraction of the scene's mean irradiance.
 pub const FLOOR_FRACTION: f32 = 0.01;
@@ -49,15 +52,17 @@ pub fn sample_frame(scene: &TracedScene, site: &SampleSite) -> (SurfacePoint, Ve
     }
 }
 
-/// Estimates E at one sample point of a cache.
+/// Estimates E at one sample point of a cache (with final gathering from `gather` when
+/// given: see [`IrradianceLookup`]).
 pub fn estimate_point(
     scene: &TracedScene,
     point: &SamplePoint,
     settings: &EstimatorSettings,
     seed: u64,
+    gather: Option<&dyn IrradianceLookup>,
 ) -> Estimate {
     let (p, origin) = sample_frame(scene, &point.site);
-    estimate(scene, &p, origin, settings, seed, point.key)
+    estimate(scene, &p, origin, settings, seed, point.key, gather)
 }
 
 /// The scene's mean irradiance (luminance, W/m²) over the front sides of its surfaces,
@@ -72,7 +77,15 @@ pub fn mean_irradiance(scene: &TracedScene, points: u32, seed: u64) -> f32 {
             let mut rng = Rng::new(seed ^ 0xF100_F100, i as u64);
             let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), true);
             let origin = scene.spawn_origin(&p);
-            let e = estimate(scene, &p, origin, &settings, seed, u64::MAX - i as u64);
+            let e = estimate(
+                scene,
+                &p,
+                origin,
+                &settings,
+                seed,
+                u64::MAX - i as u64,
+                None,
+            );
             luminance(e.value) as f64
         })
         .sum();
@@ -103,6 +116,7 @@ pub struct Baker<C: SurfaceCache> {
     cache: C,
     settings: EstimatorSettings,
     seed: u64,
+    gather: Option<Arc<dyn IrradianceLookup + Send>>,
     round: Vec<SamplePoint>,
     estimates: Vec<Estimate>,
     progress: BakeProgress,
@@ -116,10 +130,18 @@ impl<C: SurfaceCache> Baker<C> {
             cache,
             settings,
             seed,
+            gather: None,
             round: Vec::new(),
             estimates: Vec::new(),
             progress: BakeProgress::default(),
         }
+    }
+
+    /// Ends every path at its first hit with the irradiance `lookup` gives there (final
+    /// gathering from a finished coarser cache, see [`IrradianceLookup`]).
+    pub fn with_gather(mut self, lookup: Arc<dyn IrradianceLookup + Send>) -> Self {
+        self.gather = Some(lookup);
+        self
     }
 
     /// Estimates up to `max_points` points; returns true once the cache has converged.
@@ -144,9 +166,10 @@ impl<C: SurfaceCache> Baker<C> {
         let start = self.estimates.len();
         let end = (start + max_points.max(1)).min(self.round.len());
         let (settings, seed) = (&self.settings, self.seed);
+        let gather = self.gather.as_deref().map(|g| g as &dyn IrradianceLookup);
         let batch: Vec<Estimate> = self.round[start..end]
             .par_iter()
-            .map(|p| estimate_point(scene, p, settings, seed))
+            .map(|p| estimate_point(scene, p, settings, seed, gather))
             .collect();
         for e in &batch {
             self.progress.samples += e.samples as u64;

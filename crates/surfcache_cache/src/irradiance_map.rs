@@ -74,8 +74,8 @@
 //! ```
 
 use crate::{
-    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache, mesh_colour,
-    rgb9e5::Rgb9e5Scale,
+    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
+    mesh_colour, rgb9e5::Rgb9e5Scale,
 };
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};

@@ -28,7 +28,7 @@ pub mod vertex_lighting;
 use glam::Vec2;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use surfcache_trace::{Estimate, TracedScene};
+use surfcache_trace::{Estimate, IrradianceLookup, TracedScene};
 
 pub use irradiance_map::{IrradianceMapSettings, IrradianceMaps};
 pub use lightmap::{LightmapSettings, Lightmaps};
@@ -258,7 +258,12 @@ impl SurfaceCache for Cache {
         self.inner_mut().next_round(scene, points)
     }
 
-    fn finish_round(&mut self, scene: &TracedScene, points: &[SamplePoint], estimates: &[Estimate]) {
+    fn finish_round(
+        &mut self,
+        scene: &TracedScene,
+        points: &[SamplePoint],
+        estimates: &[Estimate],
+    ) {
         self.inner_mut().finish_round(scene, points, estimates)
     }
 
@@ -276,5 +281,11 @@ impl SurfaceCache for Cache {
 
     fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic {
         self.inner().diagnostic(triangle, uv, front)
+    }
+}
+
+impl IrradianceLookup for Cache {
+    fn irradiance(&self, triangle: u32, uv: Vec2, front: bool) -> glam::Vec3 {
+        self.lookup(triangle, uv, front)
     }
 }

@@ -18,7 +18,7 @@
 //! - **Storage.** RGB9E5 (4 bytes a texel) with one power-of-two [`Rgb9e5Scale`].
 
 use crate::{
-    CacheStats, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
+    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
     charts::{self, TEXEL_EPSILON},
     rgb9e5::Rgb9e5Scale,
 };
@@ -80,7 +80,7 @@ const VALID: u8 = 1;
 const BURIED: u8 = 2;
 
 /// One instance's texture within the flat texel arrays of a layer.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 struct InstanceMap {
     width: u32,
     height: u32,
@@ -97,6 +97,7 @@ impl InstanceMap {
 }
 
 /// Per-texel irradiance of every instance in its own texture (module docs).
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Lightmaps {
     settings: LightmapSettings,
     maps: Vec<InstanceMap>,
@@ -118,6 +119,10 @@ pub struct Lightmaps {
     emitted: bool,
     /// RGB9E5 texels of all layers.
     packed: Vec<u32>,
+    /// Hemisphere samples per texel of all layers (diagnostics only, not in
+    /// `cache_bytes`; 0 for texels filled from neighbours).
+    #[serde(default)]
+    sample_counts: Vec<u32>,
     scale: Rgb9e5Scale,
     stats: CacheStats,
 }
@@ -173,6 +178,7 @@ impl Lightmaps {
             slots: Vec::new(),
             emitted: false,
             packed: vec![0; layers * layer_texels],
+            sample_counts: Vec::new(),
             scale: Rgb9e5Scale::default(),
             stats: CacheStats::default(),
         }
@@ -535,12 +541,14 @@ impl SurfaceCache for Lightmaps {
         debug_assert_eq!(points.len(), self.slots.len());
         let total = self.layers * self.layer_texels;
         let mut values = vec![Vec3::ZERO; total];
+        self.sample_counts = vec![0; total];
         let mut state = vec![EMPTY; total];
         let mut stats = CacheStats::default();
         let mut rel_error = 0.0f64;
         for (&slot, e) in self.slots.iter().zip(estimates) {
             let slot = slot as usize;
             values[slot] = e.value;
+            self.sample_counts[slot] = e.samples;
             state[slot] = if e.back_face_share > self.settings.buried_threshold {
                 stats.buried += 1;
                 BURIED
@@ -625,6 +633,26 @@ impl SurfaceCache for Lightmaps {
 
     fn stats(&self) -> CacheStats {
         self.stats.clone()
+    }
+
+    fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic {
+        let layer = match (front, self.layers) {
+            (true, _) => 0,
+            (false, 2) => 1,
+            _ => return Diagnostic::default(),
+        };
+        let t = triangle as usize;
+        let instance = self.triangle_instance[t] as usize;
+        let m = &self.maps[instance];
+        let [a, b, c] = self.uv1[t];
+        let p = interpolate(a, b, c, uv) * Vec2::new(m.width as f32, m.height as f32);
+        let x = (p.x.max(0.0) as usize).min(m.width as usize - 1);
+        let y = (p.y.max(0.0) as usize).min(m.height as usize - 1);
+        let slot = layer * self.layer_texels + m.offset + y * m.width as usize + x;
+        Diagnostic {
+            samples: self.sample_counts.get(slot).copied().unwrap_or(0),
+            order: None,
+        }
     }
 
     /// One texture per instance for the front side, and one for the back side of

@@ -32,7 +32,10 @@ impl StagingDir {
     pub fn create(target: &Path) -> Result<Self> {
         if target.exists() {
             if !target.is_dir() {
-                bail!("output '{}' exists and is not a directory", target.display());
+                bail!(
+                    "output '{}' exists and is not a directory",
+                    target.display()
+                );
             }
             let earlier_bake =
                 target.join("report.json").exists() || target.join(ARCHIVE_FILE).exists();
@@ -78,7 +81,10 @@ impl StagingDir {
 
     /// Writes a file into the staging directory.
     pub fn write(&self, relative: &str, bytes: &[u8]) -> Result<()> {
-        Ok(surfcache_io::write_file_atomically(&self.path(relative), bytes)?)
+        Ok(surfcache_io::write_file_atomically(
+            &self.path(relative),
+            bytes,
+        )?)
     }
 
     /// Moves the finished directory into place (an earlier bake there is replaced).
@@ -111,7 +117,13 @@ impl Drop for StagingDir {
 fn file_stem(name: &str, taken: &mut HashSet<String>) -> String {
     let mut stem: String = name
         .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
         .collect();
     if stem.is_empty() {
         stem = "instance".into();

@@ -58,7 +58,8 @@ impl Camera {
     /// image of the given aspect ratio (width / height).
     #[inline]
     pub fn direction(&self, s: Vec2, aspect: f32) -> Vec3 {
-        (self.forward + self.right * (s.x * self.tan_half * aspect) - self.up * (s.y * self.tan_half))
+        (self.forward + self.right * (s.x * self.tan_half * aspect)
+            - self.up * (s.y * self.tan_half))
             .normalize()
     }
 }

@@ -16,8 +16,8 @@ pub fn auto_exposure(pixels: &[Vec3]) -> f32 {
     if lum.is_empty() {
         return 1.0;
     }
-    let k = (lum.len() as f32 * 0.95) as usize;
-    let (_, p95, _) = lum.select_nth_unstable_by(k.min(lum.len() - 1), f32::total_cmp);
+    let k = ((lum.len() as f32 * 0.95) as usize).min(lum.len() - 1);
+    let (_, p95, _) = lum.select_nth_unstable_by(k, f32::total_cmp);
     0.8 / *p95
 }
 
@@ -39,7 +39,13 @@ pub fn srgb_encode(x: f32) -> f32 {
 
 /// Writes `pixels` (linear, row-major, row 0 at the top) as an 8-bit sRGB PNG after
 /// `exposure` and ACES tone mapping, through a temporary file renamed into place.
-pub fn write_png(path: &Path, width: u32, height: u32, pixels: &[Vec3], exposure: f32) -> Result<()> {
+pub fn write_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[Vec3],
+    exposure: f32,
+) -> Result<()> {
     let mut bytes = Vec::with_capacity(pixels.len() * 3);
     for p in pixels {
         for c in p.to_array() {
@@ -53,7 +59,9 @@ pub fn write_png(path: &Path, width: u32, height: u32, pixels: &[Vec3], exposure
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
         let mut writer = encoder.write_header().context("cannot encode PNG")?;
-        writer.write_image_data(&bytes).context("cannot encode PNG")?;
+        writer
+            .write_image_data(&bytes)
+            .context("cannot encode PNG")?;
     }
     Ok(surfcache_io::write_file_atomically(path, &file)?)
 }

@@ -108,9 +108,15 @@ pub fn read_results(path: &Path) -> Result<Vec<ResultRow>> {
             .split(',')
             .map(|v| v.trim().parse::<f32>())
             .collect::<Result<_, _>>()
-            .map_err(|e| anyhow::anyhow!("results file '{}' line {}: {e}", path.display(), i + 1))?;
+            .map_err(|e| {
+                anyhow::anyhow!("results file '{}' line {}: {e}", path.display(), i + 1)
+            })?;
         if v.len() != 6 + with_std as usize {
-            bail!("results file '{}' line {}: wrong number of values", path.display(), i + 1);
+            bail!(
+                "results file '{}' line {}: wrong number of values",
+                path.display(),
+                i + 1
+            );
         }
         rows.push(ResultRow {
             position: Vec3::new(v[0], v[1], v[2]),

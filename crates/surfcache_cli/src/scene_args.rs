@@ -63,7 +63,8 @@ impl EnvArgs {
 /// A scene loaded into a `bevy_ecs` world with the surfcache schedule run once.
 pub struct LoadedWorld {
     pub world: World,
-    /// The scene as loaded (environment options applied), in the world's instance order.
+    /// The scene as loaded (environment options applied), its instances in the traced
+    /// scene's order.
     pub scene: Scene,
     /// The scene's name (file stem or built-in name).
     pub name: String,
@@ -95,7 +96,7 @@ impl LoadedWorld {
         let mut world = World::new();
         let mut schedule = Schedule::default();
         SurfcachePlugin.build(&mut world, &mut schedule);
-        spawn_scene(&mut world, &scene);
+        let spawned = spawn_scene(&mut world, &scene);
         let name = scene.name.clone();
         schedule.run(&mut world);
         world.clear_trackers();
@@ -103,6 +104,17 @@ impl LoadedWorld {
         if let Some(e) = &resource.error {
             return Err(anyhow!("scene '{scene_arg}': {e}"));
         }
+        // Keep the plain scene's instances in the traced scene's (entity) order.
+        let index: std::collections::HashMap<_, _> =
+            spawned.iter().enumerate().map(|(i, e)| (*e, i)).collect();
+        let mut instances = Vec::with_capacity(resource.entities.len());
+        for e in &resource.entities {
+            let i = index
+                .get(e)
+                .context("internal error: a traced instance was not spawned from the scene")?;
+            instances.push(scene.instances[*i].clone());
+        }
+        scene.instances = instances;
         Ok(Self { world, scene, name })
     }
 

@@ -185,7 +185,9 @@ impl Mesh {
             uv1: (0..n)
                 .flat_map(|t| uv1.get(t).copied().unwrap_or([Vec2::ZERO; 3]))
                 .collect(),
-            indices: (0..n as u32).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect(),
+            indices: (0..n as u32)
+                .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+                .collect(),
         }
     }
 

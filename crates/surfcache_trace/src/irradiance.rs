@@ -213,12 +213,12 @@ pub fn hemisphere_sample(
     scene: &TracedScene,
     p: &SurfacePoint,
     origin: Vec3,
-    sampler: Sampler,
+    settings: &EstimatorSettings,
     root: [f32; 5],
     rng: &mut Rng,
-    options: PathOptions,
     gather: Option<&dyn IrradianceLookup>,
 ) -> (Vec3, PathSample) {
+    let options = settings.path_options();
     let u = Vec2::new(root[0], root[1]);
     let mut x = Vec3::ZERO;
     let mut rays = 0;
@@ -226,7 +226,7 @@ pub fn hemisphere_sample(
         let light = Vec2::new(root[3], root[4]);
         x += scene.direct_light_sample(p, origin, root[2], light, &mut rays);
     }
-    let (local, weight, pdf) = match sampler {
+    let (local, weight, pdf) = match settings.sampler {
         Sampler::Uniform => {
             let l = uniform_hemisphere(u);
             (l, l.z / UNIFORM_HEMISPHERE_PDF, UNIFORM_HEMISPHERE_PDF)
@@ -270,7 +270,6 @@ pub fn estimate(
     key: u64,
     gather: Option<&dyn IrradianceLookup>,
 ) -> Estimate {
-    let options = settings.path_options();
     let sampler = settings.sampler;
     let mut rng = Rng::new(seed, key);
     let mut punctual_rays = 0;
@@ -303,8 +302,7 @@ pub fn estimate(
                 r.iter_mut().for_each(|v| *v = rng.next_f32());
                 r
             };
-            let (x, path) =
-                hemisphere_sample(scene, p, origin, sampler, root, &mut rng, options, gather);
+            let (x, path) = hemisphere_sample(scene, p, origin, settings, root, &mut rng, gather);
             back += (path.first_hit == FirstHit::Back) as u32;
             rays += path.rays as u64;
             if sampler.quasi_random() {

@@ -82,14 +82,20 @@ pub fn run(args: BakeArgs) -> Result<()> {
     };
     let Some(sampler) = Sampler::from_name(&args.sampler) else {
         let known: Vec<&str> = Sampler::ALL.iter().map(|s| s.name()).collect();
-        bail!("unknown sampler '{}' (known: {})", args.sampler, known.join(", "));
+        bail!(
+            "unknown sampler '{}' (known: {})",
+            args.sampler,
+            known.join(", ")
+        );
     };
     if !(args.max_rel_error.is_finite() && args.max_rel_error > 0.0) {
         bail!("--max-rel-error must be a positive number");
     }
     let defaults = EstimatorSettings::default();
     let min_samples = args.min_samples.unwrap_or(defaults.min_samples);
-    let max_samples = args.max_samples.unwrap_or(defaults.max_samples.max(min_samples));
+    let max_samples = args
+        .max_samples
+        .unwrap_or(defaults.max_samples.max(min_samples));
     if min_samples == 0 || max_samples < min_samples {
         bail!("need 1 ≤ --min-samples ≤ --max-samples (got {min_samples} and {max_samples})");
     }
@@ -139,17 +145,18 @@ pub fn run(args: BakeArgs) -> Result<()> {
         cache_settings.set_floor(floor);
         let cache = Cache::new(&scene, &cache_settings);
         let bar = ProgressBar::new_spinner().with_style(
-            ProgressStyle::with_template(
-                "bake {spinner} round {msg} [{elapsed_precise}]",
-            )
-            .expect("static template"),
+            ProgressStyle::with_template("bake {spinner} round {msg} [{elapsed_precise}]")
+                .expect("static template"),
         );
         let mut baker = Baker::new(cache, settings, args.seed);
         let step_start = Instant::now();
         while !baker.step(&scene, 1024) {
             if cancel.load(Ordering::SeqCst) {
                 bar.finish_and_clear();
-                bail!("interrupted: nothing was written to '{}'", args.out.display());
+                bail!(
+                    "interrupted: nothing was written to '{}'",
+                    args.out.display()
+                );
             }
             let p = baker.progress();
             let secs = step_start.elapsed().as_secs_f64().max(1e-9);
@@ -210,7 +217,10 @@ pub fn run(args: BakeArgs) -> Result<()> {
             "cache": cache_settings,
         },
     });
-    staging.write("report.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
+    staging.write(
+        "report.json",
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
     staging.commit()?;
     eprintln!(
         "baked {} ({}) in {:.1} s: {} sample points, {} bytes -> {}",

@@ -15,10 +15,16 @@ pub struct CompareArgs {
 /// Error figures of a result against a reference.
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
 pub struct Comparison {
-    /// Points compared (both finite).
+    /// Points compared (both finite, reference not zero).
     pub points: usize,
     /// Points skipped because either side is NaN (off the scene).
     pub skipped: usize,
+    /// Points where the reference is exactly zero (no light reaches them: inside closed
+    /// geometry), left out of the relative figures.
+    pub dark_points: usize,
+    /// The largest result at those points, relative to the mean reference (leaks show
+    /// here; buried points filled from visible neighbours too).
+    pub dark_max: f64,
     /// sqrt(mean over points and channels of ((E − R)/(R + ε))²), ε = 1 % of the
     /// channel's mean reference value.
     pub rel_rms: f64,
@@ -31,23 +37,36 @@ pub struct Comparison {
 }
 
 /// Compares `result` with `reference` row by row (module docs define the figures).
-pub fn compare(result: &[(glam::Vec3, glam::Vec3)], reference: &[(glam::Vec3, glam::Vec3, Option<f32>)]) -> Comparison {
-    let pairs: Vec<(glam::DVec3, glam::DVec3, Option<f32>)> = result
+pub fn compare(
+    result: &[(glam::Vec3, glam::Vec3)],
+    reference: &[(glam::Vec3, glam::Vec3, Option<f32>)],
+) -> Comparison {
+    let finite: Vec<(glam::DVec3, glam::DVec3, Option<f32>)> = result
         .iter()
         .zip(reference)
         .filter(|(r, f)| r.1.is_finite() && f.1.is_finite())
         .map(|(r, f)| (r.1.as_dvec3(), f.1.as_dvec3(), f.2))
         .collect();
+    let (pairs, dark): (Vec<_>, Vec<_>) = finite
+        .iter()
+        .copied()
+        .partition(|p| p.1.max_element() > 0.0);
     let n = pairs.len();
     let mut out = Comparison {
         points: n,
-        skipped: result.len().min(reference.len()) - n,
+        skipped: result.len().min(reference.len()) - finite.len(),
+        dark_points: dark.len(),
         ..Default::default()
     };
     if n == 0 {
         return out;
     }
     let mean = pairs.iter().map(|p| p.1).sum::<glam::DVec3>() / n as f64;
+    let mean_max = mean.max_element().max(1e-300);
+    out.dark_max = dark
+        .iter()
+        .map(|p| p.0.max_element() / mean_max)
+        .fold(0.0, f64::max);
     let eps = mean * 0.01;
     let (mut sq, mut num, mut den, mut std_sq, mut std_n) = (0.0, 0.0, 0.0, 0.0, 0usize);
     for (e, r, s) in &pairs {

@@ -34,7 +34,8 @@ pub fn run(args: QueryArgs) -> Result<()> {
         .par_iter()
         .map(|q| {
             let p = geometry.locate(q.position, q.normal)?;
-            let front = geometry.geometric_normals[p.triangle as usize].dot(p.geometric_normal) > 0.0;
+            let front =
+                geometry.geometric_normals[p.triangle as usize].dot(p.geometric_normal) > 0.0;
             Some(cache.lookup(p.triangle, p.uv, front))
         })
         .collect();

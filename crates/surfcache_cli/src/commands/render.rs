@@ -88,16 +88,19 @@ pub fn run(args: RenderArgs) -> Result<()> {
         }
         None => None,
     };
-    let (lo, hi) = scene
-        .positions
-        .iter()
-        .flatten()
-        .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), p| {
-            (lo.min(*p), hi.max(*p))
-        });
-    let camera = Camera::from_arg(args.camera.as_deref(), args.fov, default_view(lo, hi, args.fov))?;
+    let (lo, hi) = scene.positions.iter().flatten().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    let camera = Camera::from_arg(
+        args.camera.as_deref(),
+        args.fov,
+        default_view(lo, hi, args.fov),
+    )?;
     let aspect = width as f32 / height as f32;
-    let reference = args.reference.map(|n| EstimatorSettings::fixed(Sampler::Best, n, None));
+    let reference = args
+        .reference
+        .map(|n| EstimatorSettings::fixed(Sampler::Best, n, None));
     let show = args.show.as_deref();
     let bar = ProgressBar::new(height as u64).with_style(
         ProgressStyle::with_template("render {bar:40} {pos}/{len} rows, eta {eta}")
@@ -112,8 +115,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
                         let mut sum = Vec3::ZERO;
                         for s in 0..SUBPIXELS * SUBPIXELS {
                             let sub = Vec2::new((s % SUBPIXELS) as f32, (s / SUBPIXELS) as f32);
-                            let px = Vec2::new(x as f32, y as f32)
-                                + (sub + 0.5) / SUBPIXELS as f32;
+                            let px = Vec2::new(x as f32, y as f32) + (sub + 0.5) / SUBPIXELS as f32;
                             let ndc = px / Vec2::new(width as f32, height as f32) * 2.0 - 1.0;
                             let d = camera.direction(ndc, aspect);
                             let Some(hit) = scene.closest_hit(camera.eye, d, f32::INFINITY) else {
@@ -123,8 +125,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
                                 continue;
                             };
                             let p = scene.hit_point(&hit, d);
-                            let front =
-                                scene.geometric_normals[hit.triangle as usize].dot(d) < 0.0;
+                            let front = scene.geometric_normals[hit.triangle as usize].dot(d) < 0.0;
                             if let (Some(kind), Some(a)) = (show, &archive) {
                                 let diag = a.cache.diagnostic(hit.triangle, hit.uv, front);
                                 sum += match kind {
@@ -143,7 +144,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
                                 (None, Some(settings)) => {
                                     let origin = scene.spawn_origin(&p);
                                     let key = ((y * width + x) * SUBPIXELS * SUBPIXELS + s) as u64;
-                                    estimate(&scene, &p, origin, settings, args.seed, key).value
+                                    estimate(&scene, &p, origin, settings, args.seed, key, None)
+                                        .value
                                 }
                                 (None, None) => Vec3::ZERO,
                             };
