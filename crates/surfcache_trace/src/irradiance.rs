@@ -6,6 +6,7 @@ use crate::{
     traced_scene::{SurfacePoint, TracedScene},
 };
 use glam::{DVec3, Vec2, Vec3};
+use serde::{Deserialize, Serialize};
 use surfcache_core::{
     geometry::to_world,
     sampling::{
@@ -15,7 +16,8 @@ use surfcache_core::{
 };
 
 /// How the hemisphere integral is sampled.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Sampler {
     /// Uniform directions over the hemisphere, p = 1/(2π), pseudo-random: the thesis.
     Uniform,
@@ -123,7 +125,7 @@ pub fn relative_error(mean: DVec3, std_error: DVec3, floor: f64) -> f64 {
 }
 
 /// How one estimate is computed and when it stops.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EstimatorSettings {
     pub sampler: Sampler,
     /// Stop once C = se/(Ē + ε) ≤ this bound (0: always draw `max_samples`).

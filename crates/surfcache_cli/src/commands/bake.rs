@@ -17,9 +17,9 @@ use std::{
     time::Instant,
 };
 use surfcache_cache::{
-    Cache, CacheSettings, Method, SurfaceCache,
+    CacheSettings, Method, SurfaceCache,
     archive::BakeArchive,
-    bake::{Baker, FLOOR_FRACTION, mean_irradiance},
+    bake::{BakeJob, BakeSettings, DEFAULT_GATHER_PASSES, FLOOR_FRACTION},
 };
 use surfcache_trace::{EstimatorSettings, Sampler};
 
@@ -64,6 +64,10 @@ pub struct BakeArgs {
     /// interpolation by at most this relative error [default: the method's own].
     #[arg(long)]
     interpolation_error: Option<f32>,
+    /// Gathering pre-passes: coarse irradiance maps whose irradiance ends the next pass's
+    /// paths at their first hit (final gathering). 0 traces every path to its end.
+    #[arg(long, default_value_t = DEFAULT_GATHER_PASSES)]
+    gather: u32,
     /// Which sides of the surfaces to bake: both, or front (counter-clockwise) only.
     #[arg(long, default_value = "both")]
     sides: String,
@@ -130,27 +134,30 @@ pub fn run(args: BakeArgs) -> Result<()> {
         let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::SeqCst));
     }
     let threads = args.threads;
-    let start = Instant::now();
-    let (cache, progress, floor, mean) = with_threads(threads, || -> Result<_> {
-        let mean = mean_irradiance(&scene, 512, args.seed);
-        let floor = (FLOOR_FRACTION * mean).max(f32::MIN_POSITIVE);
-        let settings = EstimatorSettings {
+    if args.gather > 4 {
+        bail!("--gather takes at most 4 pre-passes");
+    }
+    let settings = BakeSettings {
+        cache: cache_settings,
+        estimator: EstimatorSettings {
             sampler,
             max_rel_error: args.max_rel_error,
             min_samples,
             max_samples,
-            floor,
+            floor: 0.0,
             max_bounces: args.bounces,
-        };
-        cache_settings.set_floor(floor);
-        let cache = Cache::new(&scene, &cache_settings);
+        },
+        seed: args.seed,
+        gather_passes: args.gather,
+    };
+    let start = Instant::now();
+    let (cache, progress, settings) = with_threads(threads, || -> Result<_> {
+        let mut job = BakeJob::new(settings);
         let bar = ProgressBar::new_spinner().with_style(
-            ProgressStyle::with_template("bake {spinner} round {msg} [{elapsed_precise}]")
+            ProgressStyle::with_template("bake {spinner} {msg} [{elapsed_precise}]")
                 .expect("static template"),
         );
-        let mut baker = Baker::new(cache, settings, args.seed);
-        let step_start = Instant::now();
-        while !baker.step(&scene, 1024) {
+        while !job.step(&scene, 1024) {
             if cancel.load(Ordering::SeqCst) {
                 bar.finish_and_clear();
                 bail!(
@@ -158,21 +165,28 @@ pub fn run(args: BakeArgs) -> Result<()> {
                     args.out.display()
                 );
             }
-            let p = baker.progress();
-            let secs = step_start.elapsed().as_secs_f64().max(1e-9);
+            let p = job.progress();
+            let secs = start.elapsed().as_secs_f64().max(1e-9);
             bar.set_message(format!(
-                "{}: {} points done, {} pending, {:.1} Mrays/s",
-                p.rounds + 1,
-                p.points_done,
-                p.points_pending,
+                "pass {}/{} round {}: {} points done, {} pending, {:.1} Mrays/s",
+                p.pass + 1,
+                p.passes,
+                p.current.rounds + 1,
+                p.current.points_done,
+                p.current.points_pending,
                 p.rays as f64 / secs / 1e6
             ));
             bar.tick();
         }
         bar.finish_and_clear();
-        let progress = *baker.progress();
-        Ok((baker.into_cache(), progress, floor, mean))
+        let (progress, settings) = (job.progress(), job.settings());
+        let cache = job
+            .into_cache()
+            .context("internal error: the bake did not finish")?;
+        Ok((cache, progress, settings))
     })??;
+    let floor = settings.estimator.floor;
+    let mean = floor / FLOOR_FRACTION;
     let bake_seconds = start.elapsed().as_secs_f64();
     let stats = cache.stats();
 
@@ -196,7 +210,8 @@ pub fn run(args: BakeArgs) -> Result<()> {
         "order_histogram": stats.order_histogram,
         "buried": stats.buried,
         "dilated_texels": stats.dilated_texels,
-        "rounds": progress.rounds,
+        "rounds": progress.current.rounds,
+        "passes": progress.passes,
         "scene_mean_irradiance": mean,
         "relative_error_floor": floor,
         "lightmaps": lightmaps,
@@ -214,7 +229,8 @@ pub fn run(args: BakeArgs) -> Result<()> {
             "threads": threads.unwrap_or_else(rayon::current_num_threads),
             "sampler": sampler.name(),
             "sides": args.sides,
-            "cache": cache_settings,
+            "gather": args.gather,
+            "cache": settings.cache,
         },
     });
     staging.write(
