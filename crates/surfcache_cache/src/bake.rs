@@ -3,6 +3,7 @@
 
 use crate::{
     Cache, CacheSettings, IrradianceMapSettings, Method, SamplePoint, SampleSite, SurfaceCache,
+    UNMAPPED,
 };
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -10,10 +11,11 @@ use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use surfcache_core::{
     color::luminance,
-    sampling::{Rng, splitmix64},
+    sampling::{Cone, Rng, splitmix64},
 };
 use surfcache_trace::{
-    Estimate, EstimatorSettings, IrradianceLookup, Sampler, SurfacePoint, TracedScene, estimate,
+    Estimate, EstimatorSettings, IrradianceLookup, PointInScene, Sampler, SurfacePoint,
+    TracedScene, estimate, estimate_change,
 };
 
 /// The relative-error floor ε is this fraction of the scene's mean irradiance.
@@ -56,6 +58,42 @@ pub fn sample_frame(scene: &TracedScene, site: &SampleSite) -> (SurfacePoint, Ve
             (p, position + n * scene.spawn_offset())
         }
     }
+}
+
+/// `site` of an edited scene `new` as the scene `old` before the edit had it (same
+/// barycentrics on the corresponding triangle, the same mesh vertex for vertex sites);
+/// `None` for a site without a counterpart.
+pub fn map_site(old: &TracedScene, new: &TracedScene, site: &SampleSite, triangle_map: &[u32]) -> Option<SampleSite> {
+    match *site {
+        SampleSite::Surface { triangle, uv, front } => {
+            let t = *triangle_map.get(triangle as usize)?;
+            (t != UNMAPPED).then_some(SampleSite::Surface { triangle: t, uv, front })
+        }
+        SampleSite::Vertex { triangle, corner, front } => {
+            let t = *triangle_map.get(triangle as usize)?;
+            if t == UNMAPPED {
+                return None;
+            }
+            let vertex = new.vertex_indices[triangle as usize][corner as usize];
+            let corner = old.vertex_indices[t as usize].iter().position(|&v| v == vertex)? as u8;
+            Some(SampleSite::Vertex { triangle: t, corner, front })
+        }
+    }
+}
+
+/// The scene before an edit, for incremental re-bakes: sample points that carry a
+/// [`SamplePoint::prior`] are updated by the change between it and the edited scene
+/// ([`surfcache_trace::estimate_change`]).
+#[derive(Clone)]
+pub struct Previous {
+    pub scene: Arc<TracedScene>,
+    /// `triangle_map[t_new]`: the corresponding triangle of `scene` ([`crate::triangle_map`]).
+    pub triangle_map: Arc<Vec<u32>>,
+    /// The gathering lookup the pass used before the edit.
+    pub gather: Option<Arc<dyn IrradianceLookup + Send>>,
+    /// A sphere (centre, radius) holding every surface the edit changed: changes are then
+    /// integrated over the cone of directions towards it only.
+    pub focus: Option<(Vec3, f32)>,
 }
 
 /// Estimates E at one sample point of a cache (with final gathering from `gather` when
@@ -123,6 +161,7 @@ pub struct Baker<C: SurfaceCache> {
     settings: EstimatorSettings,
     seed: u64,
     gather: Option<Arc<dyn IrradianceLookup + Send>>,
+    previous: Option<Previous>,
     round: Vec<SamplePoint>,
     estimates: Vec<Estimate>,
     progress: BakeProgress,
@@ -137,6 +176,7 @@ impl<C: SurfaceCache> Baker<C> {
             settings,
             seed,
             gather: None,
+            previous: None,
             round: Vec::new(),
             estimates: Vec::new(),
             progress: BakeProgress::default(),
@@ -147,6 +187,13 @@ impl<C: SurfaceCache> Baker<C> {
     /// gathering from a finished coarser cache, see [`IrradianceLookup`]).
     pub fn with_gather(mut self, lookup: Arc<dyn IrradianceLookup + Send>) -> Self {
         self.gather = Some(lookup);
+        self
+    }
+
+    /// Updates points that carry a prior value by their change since `previous` (an
+    /// incremental re-bake of a remapped cache, see [`SurfaceCache::remap`]).
+    pub fn with_previous(mut self, previous: Previous) -> Self {
+        self.previous = Some(previous);
         self
     }
 
@@ -173,9 +220,38 @@ impl<C: SurfaceCache> Baker<C> {
         let end = (start + max_points.max(1)).min(self.round.len());
         let (settings, seed) = (&self.settings, self.seed);
         let gather = self.gather.as_deref().map(|g| g as &dyn IrradianceLookup);
+        let previous = self.previous.as_ref();
         let batch: Vec<Estimate> = self.round[start..end]
             .par_iter()
-            .map(|p| estimate_point(scene, p, settings, seed, gather))
+            .map(|p| {
+                let change = previous.zip(p.prior).and_then(|(prev, prior)| {
+                    let old_site = map_site(&prev.scene, scene, &p.site, &prev.triangle_map)?;
+                    Some((prev, prior, old_site))
+                });
+                match change {
+                    Some((prev, prior, old_site)) => {
+                        let (new_point, new_origin) = sample_frame(scene, &p.site);
+                        let (old_point, old_origin) = sample_frame(&prev.scene, &old_site);
+                        let new = PointInScene {
+                            scene,
+                            point: new_point,
+                            origin: new_origin,
+                            gather,
+                        };
+                        let old = PointInScene {
+                            scene: &prev.scene,
+                            point: old_point,
+                            origin: old_origin,
+                            gather: prev.gather.as_deref().map(|g| g as &dyn IrradianceLookup),
+                        };
+                        let focus = prev
+                            .focus
+                            .map(|(c, r)| Cone::towards_sphere(new_origin, c, r));
+                        estimate_change(&old, &new, prior, settings, seed, p.key, focus.as_ref())
+                    }
+                    None => estimate_point(scene, p, settings, seed, gather),
+                }
+            })
             .collect();
         for e in &batch {
             self.progress.samples += e.samples as u64;
@@ -311,6 +387,22 @@ pub struct JobProgress {
     pub finished: bool,
 }
 
+/// The caches of every pass of a finished bake (pre-passes first, the final cache last)
+/// and the settings it used (floor filled in): what an incremental re-bake starts from.
+#[derive(Clone)]
+pub struct BakeOutcome {
+    pub passes: Vec<Arc<Cache>>,
+    pub settings: BakeSettings,
+    pub progress: JobProgress,
+}
+
+impl BakeOutcome {
+    /// The final cache.
+    pub fn cache(&self) -> &Arc<Cache> {
+        self.passes.last().expect("a bake has at least its final pass")
+    }
+}
+
 /// A complete bake: the scene-brightness floor, then optional *gathering pre-passes*,
 /// then the requested cache.
 ///
@@ -321,13 +413,15 @@ pub struct JobProgress {
 /// noise. The result is biased by the previous pass's error at y, averaged over the
 /// hemisphere and scaled by albedo; on the built-in Cornell box two pre-passes keep the
 /// total error within the final pass's own bound at a tenth of the time.
+///
+/// Re-bakes after an edit are [`crate::incremental::IncrementalJob`]s.
 pub struct BakeJob {
     settings: BakeSettings,
     baker: Option<Baker<Cache>>,
     pass: u32,
     floor: Option<f32>,
     done: JobProgress,
-    finished: Option<Cache>,
+    passes: Vec<Arc<Cache>>,
 }
 
 impl BakeJob {
@@ -341,7 +435,7 @@ impl BakeJob {
                 passes: settings.gather_passes + 1,
                 ..Default::default()
             },
-            finished: None,
+            passes: Vec::new(),
         }
     }
 
@@ -360,10 +454,11 @@ impl BakeJob {
         s
     }
 
-    fn start_pass(&mut self, scene: &TracedScene, previous: Option<Cache>) {
+    fn start_pass(&mut self, scene: &TracedScene) {
         let s = self.settings();
         let passes = s.gather_passes;
-        let (cache, estimator) = if self.pass < passes {
+        let k = self.pass as usize;
+        let (cache_settings, estimator) = if self.pass < passes {
             pre_pass(self.pass, passes, &s.estimator)
         } else {
             (s.cache, s.estimator)
@@ -374,27 +469,27 @@ impl BakeJob {
         } else {
             s.seed
         };
-        let mut baker = Baker::new(Cache::new(scene, &cache), estimator, seed);
-        if let Some(prev) = previous {
-            baker = baker.with_gather(Arc::new(prev));
+        let previous_pass = k.checked_sub(1).and_then(|p| self.passes.get(p)).cloned();
+        let mut baker = Baker::new(Cache::new(scene, &cache_settings), estimator, seed);
+        if let Some(prev) = previous_pass {
+            baker = baker.with_gather(prev);
         }
         self.baker = Some(baker);
     }
 
-    /// Estimates up to `max_points` points (the first call also measures the scene's
-    /// brightness); returns true once the final cache is complete.
+    /// Estimates up to `max_points` points (the first call of a fresh bake measures the
+    /// scene's brightness instead); returns true once the final cache is complete.
     pub fn step(&mut self, scene: &TracedScene, max_points: usize) -> bool {
-        if self.finished.is_some() {
+        if self.done.finished {
             return true;
         }
         if self.floor.is_none() {
             let mean = mean_irradiance(scene, 512, self.settings.seed);
             self.floor = Some((FLOOR_FRACTION * mean).max(f32::MIN_POSITIVE));
-            self.start_pass(scene, None);
             return false;
         }
         if self.baker.is_none() {
-            self.start_pass(scene, None);
+            self.start_pass(scene);
         }
         let Some(baker) = self.baker.as_mut() else {
             return false;
@@ -408,16 +503,14 @@ impl BakeJob {
         let p = *baker.progress();
         self.done.samples += p.samples;
         self.done.rays += p.rays;
-        let cache = baker.into_cache();
+        self.done.pass = self.pass;
+        self.done.current = p;
+        self.passes.push(Arc::new(baker.into_cache()));
         if self.pass == self.settings.gather_passes {
             self.done.finished = true;
-            self.done.pass = self.pass;
-            self.done.current = p;
-            self.finished = Some(cache);
             return true;
         }
         self.pass += 1;
-        self.start_pass(scene, Some(cache));
         false
     }
 
@@ -433,8 +526,13 @@ impl BakeJob {
         p
     }
 
-    /// The final cache, once [`Self::step`] returned true.
-    pub fn into_cache(self) -> Option<Cache> {
-        self.finished
+    /// Every pass's cache and the settings, once [`Self::step`] returned true.
+    pub fn into_outcome(self) -> Option<BakeOutcome> {
+        let settings = self.settings();
+        self.done.finished.then_some(BakeOutcome {
+            passes: self.passes,
+            settings,
+            progress: self.done,
+        })
     }
 }

@@ -510,6 +510,7 @@ impl SurfaceCache for IrradianceMaps {
                         front,
                     },
                     key: sample_key(key, front, i, j, n),
+                    prior: None,
                 });
             });
         }
@@ -645,6 +646,11 @@ impl SurfaceCache for IrradianceMaps {
         grid_interpolate(1 << l, uv, |i, j| {
             self.scale.unpack(packed[grid_index(i, j)])
         })
+    }
+
+    /// For now lays the maps out afresh: an edited scene is re-baked in full.
+    fn remap(&self, _old: &TracedScene, new: &TracedScene, _triangle_map: &[u32]) -> Self {
+        Self::new(new, self.settings)
     }
 
     fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic {

@@ -18,6 +18,7 @@ pub mod archive;
 pub mod atlas;
 pub mod bake;
 pub mod charts;
+pub mod incremental;
 pub mod irradiance_map;
 pub mod lightmap;
 pub mod mesh_colour;
@@ -25,7 +26,7 @@ pub mod rgb9e5;
 pub mod texture;
 pub mod vertex_lighting;
 
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use surfcache_trace::{Estimate, IrradianceLookup, TracedScene};
@@ -92,6 +93,9 @@ pub struct SamplePoint {
     /// Stable identity: derive it from [`TracedScene::triangle_key`] and the sample's
     /// position in the cache, never from its position in a round.
     pub key: u64,
+    /// In the first round of an incremental re-bake ([`SurfaceCache::remap`]): the value
+    /// before the edit, to be updated by the estimated change rather than re-estimated.
+    pub prior: Option<Vec3>,
 }
 
 /// Figures every cache reports (`report.json`).
@@ -130,7 +134,7 @@ pub trait SurfaceCache: Send + Sync {
     fn finish_round(&mut self, scene: &TracedScene, points: &[SamplePoint], estimates: &[Estimate]);
 
     /// Baked irradiance E (W/m²) at barycentrics `uv` of `triangle`, on the given side.
-    fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> glam::Vec3;
+    fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3;
 
     /// Sample counts, bytes and method-specific figures.
     fn stats(&self) -> CacheStats;
@@ -142,6 +146,45 @@ pub trait SurfaceCache: Send + Sync {
     /// Sample count (and irradiance-map order) behind the value at a point, for the
     /// thesis' diagnostic pictures.
     fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic;
+
+    /// The cache laid out for an edited scene `new`, ready for an incremental re-bake:
+    /// its first round asks again for every sample whose triangle still exists
+    /// (`triangle_map[t_new]` is its triangle in `old`, or [`UNMAPPED`]) with the value it
+    /// had as [`SamplePoint::prior`], and for fresh samples elsewhere; later rounds refine
+    /// as usual. The cache must have finished baking over `old`.
+    fn remap(&self, old: &TracedScene, new: &TracedScene, triangle_map: &[u32]) -> Self
+    where
+        Self: Sized;
+}
+
+/// A triangle of an edited scene that has no counterpart before the edit.
+pub const UNMAPPED: u32 = u32::MAX;
+
+/// Corresponding triangles of a scene before and after an edit: `map[t_new]` is the old
+/// index of new triangle `t_new`, or [`UNMAPPED`]. Instances correspond when
+/// `instance_map[i_new] = Some(i_old)`; their triangles then correspond when both have the
+/// same mesh triangle (`local_triangle`), e.g. the same mesh moved or re-coloured.
+pub fn triangle_map(old: &TracedScene, new: &TracedScene, instance_map: &[Option<u32>]) -> Vec<u32> {
+    let mut map = vec![UNMAPPED; new.triangle_count()];
+    for (i_new, range) in new.instance_triangles.iter().enumerate() {
+        let Some(i_old) = instance_map.get(i_new).copied().flatten() else {
+            continue;
+        };
+        let Some(old_range) = old.instance_triangles.get(i_old as usize) else {
+            continue;
+        };
+        // Local triangle → old traced triangle (degenerate ones may be missing).
+        let mut by_local = std::collections::HashMap::with_capacity(old_range.len());
+        for t in old_range.clone() {
+            by_local.insert(old.local_triangle[t as usize], t);
+        }
+        for t in range.clone() {
+            if let Some(&t_old) = by_local.get(&new.local_triangle[t as usize]) {
+                map[t as usize] = t_old;
+            }
+        }
+    }
+    map
 }
 
 /// What a cache knows about one surface point, for diagnostic pictures.
@@ -267,7 +310,7 @@ impl SurfaceCache for Cache {
         self.inner_mut().finish_round(scene, points, estimates)
     }
 
-    fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> glam::Vec3 {
+    fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
         self.inner().lookup(triangle, uv, front)
     }
 
@@ -282,10 +325,18 @@ impl SurfaceCache for Cache {
     fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic {
         self.inner().diagnostic(triangle, uv, front)
     }
+
+    fn remap(&self, old: &TracedScene, new: &TracedScene, triangle_map: &[u32]) -> Self {
+        match self {
+            Self::Vertex(c) => Self::Vertex(c.remap(old, new, triangle_map)),
+            Self::IrradianceMap(c) => Self::IrradianceMap(c.remap(old, new, triangle_map)),
+            Self::Lightmap(c) => Self::Lightmap(c.remap(old, new, triangle_map)),
+        }
+    }
 }
 
 impl IrradianceLookup for Cache {
-    fn irradiance(&self, triangle: u32, uv: Vec2, front: bool) -> glam::Vec3 {
+    fn irradiance(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
         self.lookup(triangle, uv, front)
     }
 }

@@ -18,7 +18,7 @@
 //! - **Storage.** RGB9E5 (4 bytes a texel) with one power-of-two [`Rgb9e5Scale`].
 
 use crate::{
-    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
+    CacheStats, Diagnostic, IrradianceTexture, Method, UNMAPPED, SamplePoint, SampleSite, SurfaceCache,
     charts::{self, TEXEL_EPSILON},
     rgb9e5::Rgb9e5Scale,
 };
@@ -110,10 +110,19 @@ pub struct Lightmaps {
     /// Texels in one layer (all instances), and the number of layers (1 or 2).
     layer_texels: usize,
     layers: usize,
-    /// Owning triangle and sample barycentrics per texel of a layer (kept until the bake
-    /// is finished).
+    /// Owning triangle and sample barycentrics per texel of a layer (kept in memory for
+    /// incremental re-bakes, not stored in archives).
+    #[serde(skip)]
     owner: Vec<u32>,
+    #[serde(skip)]
     sample_uv: Vec<Vec2>,
+    /// Values before an edit per texel slot, for an incremental re-bake.
+    #[serde(skip)]
+    priors: Vec<Option<Vec3>>,
+    /// Texel slots whose estimate was buried (their stored value was filled from
+    /// neighbours, so it is no prior for a change estimate).
+    #[serde(skip)]
+    buried_slots: Vec<bool>,
     /// Texel slot (layer · layer_texels + texel) of each point of the round.
     slots: Vec<u32>,
     emitted: bool,
@@ -144,6 +153,11 @@ impl Lightmaps {
             .into_par_iter()
             .map(|i| build_instance(scene, i, &settings))
             .collect();
+        Self::from_instances(scene, settings, built)
+    }
+
+    /// Concatenates the instances' layouts into the flat arrays of a layer.
+    fn from_instances(scene: &TracedScene, settings: LightmapSettings, built: Vec<BuiltInstance>) -> Self {
         let n = scene.triangle_count();
         let mut maps = Vec::with_capacity(built.len());
         let mut uv1 = Vec::with_capacity(n);
@@ -175,6 +189,8 @@ impl Lightmaps {
             layers,
             owner,
             sample_uv,
+            priors: Vec::new(),
+            buried_slots: Vec::new(),
             slots: Vec::new(),
             emitted: false,
             packed: vec![0; layers * layer_texels],
@@ -205,6 +221,28 @@ impl Lightmaps {
     /// UV1 of the corners of traced triangle `t`, in the traced scene's corner order.
     pub fn triangle_uv1(&self, t: u32) -> [Vec2; 3] {
         self.uv1[t as usize]
+    }
+
+    /// Instance `io`'s finished layout, for the same mesh placed again with its triangles
+    /// starting at traced index `first_triangle`.
+    fn instance_layout(&self, scene: &TracedScene, io: usize, first_triangle: u32) -> BuiltInstance {
+        let m = self.maps[io];
+        let range = scene.instance_triangles[io].clone();
+        let (start, end) = (range.start as usize, range.end as usize);
+        let charts = &self.chart[start..end];
+        let base = charts.iter().copied().min().unwrap_or(0);
+        let owner = self.owner[m.offset..m.offset + m.texels()]
+            .iter()
+            .map(|&t| if t == NONE { NONE } else { t - range.start + first_triangle })
+            .collect();
+        BuiltInstance {
+            map: m,
+            uv1: self.uv1[start..end].to_vec(),
+            chart: charts.iter().map(|c| c - base).collect(),
+            chart_count: charts.iter().map(|c| c - base + 1).max().unwrap_or(0),
+            owner,
+            sample_uv: self.sample_uv[m.offset..m.offset + m.texels()].to_vec(),
+        }
     }
 
     /// The texels of one layer of one instance.
@@ -523,6 +561,11 @@ impl SurfaceCache for Lightmaps {
                             front: layer == 0,
                         },
                         key: texel_key(scene.triangle_key(triangle), layer, x, y),
+                        prior: self
+                            .priors
+                            .get(layer * self.layer_texels + i)
+                            .copied()
+                            .flatten(),
                     });
                     self.slots.push((layer * self.layer_texels + i) as u32);
                 }
@@ -559,6 +602,7 @@ impl SurfaceCache for Lightmaps {
             stats.max_samples_per_point = stats.max_samples_per_point.max(e.samples);
             rel_error += e.rel_error as f64;
         }
+        self.buried_slots = state.iter().map(|&st| st == BURIED).collect();
         stats.sample_points = estimates.len() as u64;
         stats.mean_rel_error = rel_error / estimates.len().max(1) as f64;
         // Chart of each texel of a layer (for the same-chart preference of the fill).
@@ -605,9 +649,8 @@ impl SurfaceCache for Lightmaps {
         // corner); the per-triangle instance index is the engine's mesh binding.
         stats.cache_bytes = 4 * total as u64 + 24 * self.uv1.len() as u64;
         self.stats = stats;
-        self.owner = Vec::new();
-        self.sample_uv = Vec::new();
         self.slots = Vec::new();
+        self.priors = Vec::new();
     }
 
     /// Bilinear sample of the side's texture at the triangle's interpolated UV1. A back
@@ -633,6 +676,56 @@ impl SurfaceCache for Lightmaps {
 
     fn stats(&self) -> CacheStats {
         self.stats.clone()
+    }
+
+    /// Instances whose triangles all correspond one to one (same mesh, same mirroring)
+    /// keep their layout, and their texels' values become priors; the others are laid out
+    /// afresh.
+    fn remap(&self, old: &TracedScene, new: &TracedScene, triangle_map: &[u32]) -> Self {
+        let mut reused: Vec<Option<usize>> = vec![None; new.instance_triangles.len()];
+        let built: Vec<BuiltInstance> = (0..new.instance_triangles.len())
+            .map(|i| {
+                let range = new.instance_triangles[i].clone();
+                let first_old = triangle_map.get(range.start as usize).copied().unwrap_or(UNMAPPED);
+                let i_old = old.instance.get(first_old as usize).map(|&k| k as usize);
+                let one_to_one = i_old.is_some_and(|io| {
+                    let old_range = &old.instance_triangles[io];
+                    old_range.len() == range.len()
+                        && old.mirrored[io] == new.mirrored[i]
+                        && range.clone().enumerate().all(|(k, t)| {
+                            triangle_map[t as usize] == old_range.start + k as u32
+                        })
+                        && !self.owner.is_empty()
+                });
+                match i_old.filter(|_| one_to_one) {
+                    Some(io) => {
+                        reused[i] = Some(io);
+                        self.instance_layout(old, io, range.start)
+                    }
+                    None => build_instance(new, i, &self.settings),
+                }
+            })
+            .collect();
+        let mut fresh = Self::from_instances(new, self.settings, built);
+        let mut priors = vec![None; fresh.layers * fresh.layer_texels];
+        for (i, io) in reused.iter().enumerate() {
+            let Some(io) = *io else { continue };
+            let (m, m_old) = (fresh.maps[i], self.maps[io]);
+            for layer in 0..fresh.layers.min(self.layers) {
+                let slice = self.texture_slice(layer, io);
+                for k in 0..m.texels() {
+                    let old_slot = layer * self.layer_texels + m_old.offset + k;
+                    let buried = self.buried_slots.get(old_slot).copied().unwrap_or(true);
+                    if fresh.owner[m.offset + k] != NONE && !buried {
+                        priors[layer * fresh.layer_texels + m.offset + k] =
+                            Some(self.scale.unpack(slice[k]));
+                    }
+                }
+            }
+            debug_assert_eq!((m.width, m.height), (m_old.width, m_old.height));
+        }
+        fresh.priors = priors;
+        fresh
     }
 
     fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic {

@@ -25,7 +25,7 @@
 //! barycentric interpolation exactly.
 
 use crate::{
-    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
+    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache, UNMAPPED,
     irradiance_map::EstimateTotals, mesh_colour, rgb9e5::Rgb9e5Scale,
 };
 use glam::{Vec2, Vec3};
@@ -75,6 +75,9 @@ pub struct VertexLighting {
     buried: u64,
     /// Whether the one round was asked for.
     requested: bool,
+    /// Values before an edit, per slot, for an incremental re-bake ([`SurfaceCache::remap`]).
+    #[serde(skip)]
+    priors: Vec<Option<Vec3>>,
 }
 
 impl VertexLighting {
@@ -116,6 +119,7 @@ impl VertexLighting {
             totals: EstimateTotals::default(),
             buried: 0,
             requested: false,
+            priors: Vec::new(),
         }
     }
 
@@ -168,6 +172,11 @@ impl SurfaceCache for VertexLighting {
                                 front,
                             },
                             key: vertex_key(instance_key, vertex, front),
+                            prior: self
+                                .priors
+                                .get(2 * id as usize + (!front) as usize)
+                                .copied()
+                                .flatten(),
                         });
                     }
                 }
@@ -198,6 +207,7 @@ impl SurfaceCache for VertexLighting {
             self.totals.add(e);
             self.buried += (e.back_face_share > BURIED_THRESHOLD) as u64;
         }
+        self.priors = Vec::new();
         let max = values.iter().fold(0.0f32, |m, v| m.max(v.max_element()));
         self.scale = Rgb9e5Scale::for_max(max);
         for (p, v) in self.packed.iter_mut().zip(&values) {
@@ -209,6 +219,33 @@ impl SurfaceCache for VertexLighting {
     fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
         let [a, b, c] = [0, 1, 2].map(|k| self.corner_value(triangle, k, front));
         interpolate(a, b, c, uv)
+    }
+
+    fn remap(&self, old: &TracedScene, new: &TracedScene, triangle_map: &[u32]) -> Self {
+        let mut fresh = Self::new(new, self.settings);
+        let mut priors = vec![None; fresh.packed.len()];
+        for (t, ids) in fresh.corners.iter().enumerate() {
+            let t_old = triangle_map[t];
+            if t_old == UNMAPPED {
+                continue;
+            }
+            for (k, &id) in ids.iter().enumerate() {
+                // The same mesh vertex; its corner slot may differ if mirroring changed.
+                let vertex = new.vertex_indices[t][k];
+                let Some(k_old) = old.vertex_indices[t_old as usize]
+                    .iter()
+                    .position(|&v| v == vertex)
+                else {
+                    continue;
+                };
+                for front in [true, false] {
+                    priors[2 * id as usize + (!front) as usize] =
+                        Some(self.corner_value(t_old, k_old, front));
+                }
+            }
+        }
+        fresh.priors = priors;
+        fresh
     }
 
     fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic {

@@ -218,6 +218,69 @@ pub fn sobol_4d(index: u32, dimension_set: u32, seed: u32) -> [f32; 4] {
     sobol_burley::sample_4d(index & 0xFFFF, dimension_set, seed)
 }
 
+/// A cone of directions around a unit `axis`: those within angle acos(`cos_max`) of it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cone {
+    pub axis: Vec3,
+    pub cos_max: f32,
+}
+
+impl Cone {
+    /// The cone from `from` that holds the sphere (`centre`, `radius`): all directions
+    /// when `from` is inside the sphere.
+    pub fn towards_sphere(from: Vec3, centre: Vec3, radius: f32) -> Self {
+        let d = centre - from;
+        let dist2 = d.length_squared();
+        if dist2 <= radius * radius {
+            return Self {
+                axis: Vec3::Z,
+                cos_max: -1.0,
+            };
+        }
+        let sin2 = radius * radius / dist2;
+        Self {
+            axis: d / dist2.sqrt(),
+            cos_max: (1.0 - sin2).max(0.0).sqrt(),
+        }
+    }
+
+    /// Solid angle 2π(1 − cos θ_max).
+    #[inline]
+    pub fn solid_angle(&self) -> f32 {
+        TAU * (1.0 - self.cos_max)
+    }
+
+    /// Whether unit direction `w` lies in the cone.
+    #[inline]
+    pub fn contains(&self, w: Vec3) -> bool {
+        self.axis.dot(w) >= self.cos_max
+    }
+
+    /// Whether every direction of the cone lies on or below the plane with normal `n`
+    /// (the angle between `n` and the axis is at least 90° plus the cone's half-angle).
+    #[inline]
+    pub fn below(&self, n: Vec3) -> bool {
+        if self.cos_max <= 0.0 {
+            return false;
+        }
+        let sin_half = (1.0 - self.cos_max * self.cos_max).max(0.0).sqrt();
+        n.dot(self.axis) <= -sin_half
+    }
+
+    /// A direction uniformly distributed in the cone, density 1 / [`Self::solid_angle`]
+    /// (pbrt-v4 §A.5.4, `SampleUniformCone`).
+    #[inline]
+    pub fn sample(&self, u: Vec2) -> Vec3 {
+        let cos_theta = (1.0 - u.x) + u.x * self.cos_max;
+        let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+        let phi = TAU * u.y;
+        crate::geometry::to_world(
+            Vec3::new(sin_theta * phi.cos(), sin_theta * phi.sin(), cos_theta),
+            self.axis,
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -277,6 +340,24 @@ mod tests {
             }
             assert!(hit.iter().all(|&h| h));
         }
+    }
+
+    #[test]
+    fn cone_samples_stay_inside_and_cover_it() {
+        let cone = Cone::towards_sphere(Vec3::ZERO, Vec3::new(1.0, 2.0, 2.0), 1.5);
+        assert!((cone.axis.length() - 1.0).abs() < 1e-6);
+        let mut rng = Rng::new(9, 9);
+        let mut mean = Vec3::ZERO;
+        for _ in 0..20_000 {
+            let w = cone.sample(rng.next_vec2());
+            assert!((w.length() - 1.0).abs() < 1e-4 && cone.axis.dot(w) >= cone.cos_max - 1e-5);
+            mean += w;
+        }
+        // The mean direction of a uniform cone is its axis.
+        assert!((mean.normalize() - cone.axis).length() < 1e-2);
+        assert!(Cone::towards_sphere(Vec3::ZERO, Vec3::ZERO, 1.0).solid_angle() > 12.5);
+        let below = Cone::towards_sphere(Vec3::ZERO, Vec3::new(0.0, -5.0, 0.0), 1.0);
+        assert!(below.below(Vec3::Y) && !below.below(Vec3::X));
     }
 
     #[test]

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use surfcache_core::{
     geometry::to_world,
     sampling::{
-        Rng, UNIFORM_HEMISPHERE_PDF, cosine_hemisphere, cosine_hemisphere_pdf, sobol_4d,
+        Cone, Rng, UNIFORM_HEMISPHERE_PDF, cosine_hemisphere, cosine_hemisphere_pdf, sobol_4d,
         splitmix64, uniform_hemisphere,
     },
 };
@@ -202,52 +202,69 @@ impl Estimate {
     }
 }
 
-/// One sample X of the hemisphere integral at `p` (shading normal ν, geometric normal μ),
-/// rays leaving from `origin`. `root` holds the first-bounce dimensions: direction (0, 1),
-/// light choice (2) and point on the light (3, 4); deeper bounces draw from `rng`.
+/// One sample X of the hemisphere integral at `at` (shading normal ν, geometric normal μ).
+/// `root` holds the first-bounce dimensions: direction (0, 1), light choice (2) and point
+/// on the light (3, 4); deeper bounces draw from `rng`.
 ///
 /// Without next-event estimation X = L_in(ω) ⟨ν, ω⟩ / p(ω), with ω drawn uniformly
 /// (p = 1/2π) or cosine-weighted (p = cos θ/π, X = π L_in). With it, X adds the light
 /// sample of [`TracedScene::direct_light_sample`] and the continuation's emission is
 /// MIS-weighted. Directions under the geometric surface carry no light (CONTRACT.md).
+///
+/// With `focus`, X estimates the integral over the directions of that cone only: ω is
+/// drawn uniformly in the cone (p = 1/Ω), and next-event samples count only inside it,
+/// MIS-weighted against the cone density.
 #[inline]
 pub fn hemisphere_sample(
-    scene: &TracedScene,
-    p: &SurfacePoint,
-    origin: Vec3,
+    at: &PointInScene,
     settings: &EstimatorSettings,
     root: [f32; 5],
     rng: &mut Rng,
-    gather: Option<&dyn IrradianceLookup>,
+    focus: Option<&Cone>,
 ) -> (Vec3, PathSample) {
+    let (scene, p, origin) = (at.scene, &at.point, at.origin);
     let options = settings.path_options();
     let u = Vec2::new(root[0], root[1]);
     let mut x = Vec3::ZERO;
     let mut rays = 0;
     if options.next_event {
         let light = Vec2::new(root[3], root[4]);
-        x += scene.direct_light_sample(p, origin, root[2], light, &mut rays);
+        x += match focus {
+            None => scene.direct_light_sample(p, origin, root[2], light, &mut rays),
+            Some(cone) => {
+                let pdf = 1.0 / cone.solid_angle();
+                scene.direct_light_sample_against(p, origin, root[2], light, &mut rays, |_, w| {
+                    cone.contains(w).then_some(pdf)
+                })
+            }
+        };
     }
-    let (local, weight, pdf) = match settings.sampler {
-        Sampler::Uniform => {
+    let (w, weight, pdf) = match (focus, settings.sampler) {
+        (Some(cone), _) => {
+            let w = cone.sample(u);
+            let omega = cone.solid_angle();
+            (w, p.shading_normal.dot(w) * omega, 1.0 / omega)
+        }
+        (None, Sampler::Uniform) => {
             let l = uniform_hemisphere(u);
-            (l, l.z / UNIFORM_HEMISPHERE_PDF, UNIFORM_HEMISPHERE_PDF)
+            let w = to_world(l, p.shading_normal);
+            (w, l.z / UNIFORM_HEMISPHERE_PDF, UNIFORM_HEMISPHERE_PDF)
         }
         // cos θ / (cos θ/π) = π
-        _ => {
+        (None, _) => {
             let l = cosine_hemisphere(u);
-            (l, core::f32::consts::PI, cosine_hemisphere_pdf(l.z))
+            let w = to_world(l, p.shading_normal);
+            (w, core::f32::consts::PI, cosine_hemisphere_pdf(l.z))
         }
     };
-    let w = to_world(local, p.shading_normal);
-    if w.dot(p.geometric_normal) <= 0.0 || local.z <= 0.0 {
+    if w.dot(p.geometric_normal) <= 0.0 || w.dot(p.shading_normal) <= 0.0 {
         let path = PathSample {
             rays,
             ..Default::default()
         };
         return (x, path);
     }
-    let mut path = scene.incident_radiance(origin, w, Some(pdf), rng, options, gather);
+    let mut path = scene.incident_radiance(origin, w, Some(pdf), rng, options, at.gather);
     path.rays += rays;
     (x + path.radiance * weight, path)
 }
@@ -272,16 +289,122 @@ pub fn estimate(
     key: u64,
     gather: Option<&dyn IrradianceLookup>,
 ) -> Estimate {
-    let sampler = settings.sampler;
-    let mut rng = Rng::new(seed, key);
     let mut punctual_rays = 0;
     let punctual = scene.punctual_irradiance_from(p, origin, &mut punctual_rays);
-    let mut rays = punctual_rays as u64;
+    let at = PointInScene {
+        scene,
+        point: *p,
+        origin,
+        gather,
+    };
+    let mut e = sample_adaptively(
+        settings,
+        seed,
+        key,
+        punctual,
+        settings.max_rel_error,
+        settings.min_samples,
+        |root, rng| {
+            let (x, path) = hemisphere_sample(&at, settings, root, rng, None);
+            (x, path.first_hit, path.rays)
+        },
+    );
+    e.rays += punctual_rays as u64;
+    e
+}
+
+/// A point as one scene sees it: where it is, where its rays leave from, and the
+/// gathering lookup of that scene's previous pass (if any).
+#[derive(Clone, Copy)]
+pub struct PointInScene<'a> {
+    pub scene: &'a TracedScene,
+    pub point: SurfacePoint,
+    pub origin: Vec3,
+    pub gather: Option<&'a dyn IrradianceLookup>,
+}
+
+/// The least number of sample pairs of [`estimate_change`].
+pub const CHANGE_MIN_SAMPLES: u32 = QMC_REPLICATES;
+
+/// The share of the error bound a change estimate may add to its prior's error.
+pub const CHANGE_ERROR_SHARE: f32 = 0.5;
+
+/// E at a point of an edited scene from its value `prior` before the edit plus the
+/// change, estimated by *correlated sampling*: every sample traces the same directions
+/// and random numbers in both scenes, X = X_new − X_old, so wherever the edit does not
+/// touch a path the difference is exactly zero and the estimate stops after
+/// [`CHANGE_MIN_SAMPLES`] pairs; it stops when its standard error is at most
+/// [`CHANGE_ERROR_SHARE`] × bound × (E + ε). Unbiased: E = E_old + E[X_new − X_old].
+/// The punctual lights' exact parts enter as their difference too.
+///
+/// With `focus`, only directions in that cone can differ (the edit lies inside it, and
+/// both scenes' gathering lookups agree elsewhere): the change is integrated over the
+/// cone alone ([`hemisphere_sample`]), and is exactly zero, with no rays traced, when
+/// the cone lies below the point's surface.
+pub fn estimate_change(
+    old: &PointInScene,
+    new: &PointInScene,
+    prior: Vec3,
+    settings: &EstimatorSettings,
+    seed: u64,
+    key: u64,
+    focus: Option<&Cone>,
+) -> Estimate {
+    if let Some(cone) = focus
+        && cone.below(new.point.geometric_normal)
+        && cone.below(old.point.geometric_normal)
+        && new.scene.lights.is_empty()
+        && old.scene.lights.is_empty()
+    {
+        return Estimate {
+            value: prior,
+            ..Default::default()
+        };
+    }
+    let mut punctual_rays = 0;
+    let punctual_new = new
+        .scene
+        .punctual_irradiance_from(&new.point, new.origin, &mut punctual_rays);
+    let punctual_old = old
+        .scene
+        .punctual_irradiance_from(&old.point, old.origin, &mut punctual_rays);
+    let mut e = sample_adaptively(
+        settings,
+        seed,
+        key,
+        prior + punctual_new - punctual_old,
+        settings.max_rel_error * CHANGE_ERROR_SHARE,
+        CHANGE_MIN_SAMPLES,
+        |root, rng| {
+            let mut twin = rng.clone();
+            let (x_new, path_new) = hemisphere_sample(new, settings, root, rng, focus);
+            let (x_old, path_old) = hemisphere_sample(old, settings, root, &mut twin, focus);
+            (x_new - x_old, path_new.first_hit, path_new.rays + path_old.rays)
+        },
+    );
+    e.rays += punctual_rays as u64;
+    e
+}
+
+/// The adaptive loop of [`estimate`] and [`estimate_change`]: draws X = `draw(root, rng)`
+/// in rounds of [`QMC_REPLICATES`] (root dimensions from per-replicate scrambled Sobol
+/// points or from the stream) until C = se / (|offset + mean| + ε) ≤ `bound` from `min`
+/// samples on, or `settings.max_samples`; the value is offset + mean.
+fn sample_adaptively(
+    settings: &EstimatorSettings,
+    seed: u64,
+    key: u64,
+    offset: Vec3,
+    bound: f32,
+    min: u32,
+    mut draw: impl FnMut([f32; 5], &mut Rng) -> (Vec3, FirstHit, u32),
+) -> Estimate {
+    let sampler = settings.sampler;
+    let mut rng = Rng::new(seed, key);
     let floor = settings.floor as f64;
-    let bound = settings.max_rel_error as f64;
     let max = settings.max_samples.max(1);
-    let min = settings.min_samples.clamp(1, max);
-    let mut back = 0u32;
+    let min = min.clamp(1, max);
+    let (mut back, mut rays) = (0u32, 0u64);
     // Pseudo-random: one accumulator. Quasi-random: one per replicate.
     let mut single = Accumulator::default();
     let mut replicates = [Accumulator::default(); QMC_REPLICATES as usize];
@@ -304,9 +427,9 @@ pub fn estimate(
                 r.iter_mut().for_each(|v| *v = rng.next_f32());
                 r
             };
-            let (x, path) = hemisphere_sample(scene, p, origin, settings, root, &mut rng, gather);
-            back += (path.first_hit == FirstHit::Back) as u32;
-            rays += path.rays as u64;
+            let (x, first_hit, path_rays) = draw(root, &mut rng);
+            back += (first_hit == FirstHit::Back) as u32;
+            rays += path_rays as u64;
             if sampler.quasi_random() {
                 replicates[(n % QMC_REPLICATES) as usize].add(x);
             } else {
@@ -319,12 +442,12 @@ pub fn estimate(
         } else {
             (single.mean(), single.std_error())
         };
-        let total = mean + punctual.as_dvec3();
-        if n >= max || (n >= min && relative_error(total, se, floor) <= bound) {
+        let total = (mean + offset.as_dvec3()).abs();
+        if n >= max || (n >= min && relative_error(total, se, floor) <= bound as f64) {
             break (mean, se);
         }
     };
-    let value = (mean + punctual.as_dvec3()).as_vec3();
+    let value = (mean + offset.as_dvec3()).as_vec3();
     let std_error = if n < 2 {
         Vec3::ZERO
     } else {
@@ -334,7 +457,7 @@ pub fn estimate(
         value,
         std_error,
         samples: n,
-        rel_error: relative_error(value.as_dvec3(), std_error.as_dvec3(), floor) as f32,
+        rel_error: relative_error(value.as_dvec3().abs(), std_error.as_dvec3(), floor) as f32,
         back_face_share: back as f32 / n as f32,
         rays,
     }

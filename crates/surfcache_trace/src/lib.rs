@@ -26,7 +26,10 @@ pub mod path_tracer;
 pub mod traced_scene;
 
 pub use bvh::{Bvh, Hit};
-pub use irradiance::{Estimate, EstimatorSettings, Query, Sampler, estimate, reference_irradiance};
+pub use irradiance::{
+    Estimate, EstimatorSettings, PointInScene, Query, Sampler, estimate, estimate_change,
+    reference_irradiance,
+};
 pub use light_sampling::LightSampler;
 pub use path_tracer::{FirstHit, IrradianceLookup, PathOptions};
 pub use traced_scene::{SurfacePoint, TracedScene};

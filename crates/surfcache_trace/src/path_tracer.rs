@@ -131,6 +131,24 @@ impl TracedScene {
         u: Vec2,
         rays: &mut u32,
     ) -> Vec3 {
+        self.direct_light_sample_against(p, origin, select, u, rays, |cos, _| {
+            Some(cosine_hemisphere_pdf(cos))
+        })
+    }
+
+    /// [`Self::direct_light_sample`] MIS-weighted against another direction sampler:
+    /// `other_pdf(cos θ, ω)` gives its density at ω, or `None` when ω lies outside the
+    /// integral's domain (the sample then counts nothing).
+    #[inline]
+    pub fn direct_light_sample_against(
+        &self,
+        p: &SurfacePoint,
+        origin: Vec3,
+        select: f32,
+        u: Vec2,
+        rays: &mut u32,
+        other_pdf: impl Fn(f32, Vec3) -> Option<f32>,
+    ) -> Vec3 {
         // Sampled as seen from the ray origin, so the shadow ray ends exactly on the light.
         let Some(ls) = self.light_sampler.sample(self, origin, select, u) else {
             return Vec3::ZERO;
@@ -139,6 +157,9 @@ impl TracedScene {
         if cos <= 0.0 || p.geometric_normal.dot(ls.direction) <= 0.0 {
             return Vec3::ZERO;
         }
+        let Some(pdf_other) = other_pdf(cos, ls.direction) else {
+            return Vec3::ZERO;
+        };
         // Stop short of the sampled point so the emitter itself does not occlude it.
         let tmax = if ls.distance.is_finite() {
             ls.distance - self.spawn_offset()
@@ -152,7 +173,7 @@ impl TracedScene {
         if self.occluded(origin, ls.direction, tmax) {
             return Vec3::ZERO;
         }
-        let weight = power_heuristic(ls.pdf, cosine_hemisphere_pdf(cos));
+        let weight = power_heuristic(ls.pdf, pdf_other);
         ls.radiance * (cos * weight / ls.pdf)
     }
 

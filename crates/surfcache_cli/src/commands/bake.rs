@@ -179,11 +179,12 @@ pub fn run(args: BakeArgs) -> Result<()> {
             bar.tick();
         }
         bar.finish_and_clear();
-        let (progress, settings) = (job.progress(), job.settings());
-        let cache = job
-            .into_cache()
+        let mut outcome = job
+            .into_outcome()
             .context("internal error: the bake did not finish")?;
-        Ok((cache, progress, settings))
+        let cache = outcome.passes.pop().context("internal error: no final pass")?;
+        let cache = Arc::try_unwrap(cache).unwrap_or_else(|shared| (*shared).clone());
+        Ok((cache, outcome.progress, outcome.settings))
     })??;
     let floor = settings.estimator.floor;
     let mean = floor / FLOOR_FRACTION;
