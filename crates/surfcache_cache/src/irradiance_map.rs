@@ -37,7 +37,12 @@
 //! ring from the valid ones ([`IrradianceMaps`] keeps the raw estimates while baking and
 //! refills after each round); a grid that is buried everywhere keeps its raw values.
 //! Buried samples are left out of the refinement test as new samples (their filled values
-//! are used as coarse neighbours). They are counted in [`CacheStats::buried`].
+//! are used as coarse neighbours). A grid with both buried and valid samples refines
+//! anyway, up to its maximum order: other geometry cuts through the triangle, and the
+//! light next to the cut (the contact shadow around a box standing in the middle of a
+//! large floor triangle, whose only sample near the box is buried) would otherwise pass
+//! the test unseen between the valid samples. A grid buried everywhere shows nothing and
+//! does not refine. Buried samples are counted in [`CacheStats::buried`].
 //!
 //! **Storage.** Samples are RGB9E5 (4 bytes, [`Rgb9e5Scale`] chosen from the largest
 //! stored value), grid by grid; a grid slot `2·triangle + side` (side 0 = front) has a
@@ -619,8 +624,10 @@ impl SurfaceCache for IrradianceMaps {
         for &g in &w.pending {
             let n = order_of(self.log2_orders[g as usize]);
             if n < w.max_orders[g as usize / 2] {
-                let e = self.interpolation_error(&w, self.offsets[g as usize] as usize, n);
-                w.refine[g as usize] = e > bound;
+                let base = self.offsets[g as usize] as usize;
+                let burial = &w.burial[base..base + grid_size(n)];
+                let mixed = burial.contains(&VALID) && burial.iter().any(|&b| b != VALID);
+                w.refine[g as usize] = mixed || self.interpolation_error(&w, base, n) > bound;
             }
         }
         w.pending.clear();

@@ -282,13 +282,29 @@ fn buried_samples_are_filled_from_neighbours_and_counted() {
         }
     });
     let stats = maps.stats();
-    // Floor triangle (0,0),(1,0),(1,1): 1 of 6 samples under z > 0.6; (0,0),(1,1),(0,1):
-    // 3 of 6; the attic: all 12.
-    assert_eq!(stats.buried, 1 + 3 + 12);
-    // Buried samples do not drive refinement.
+    // The floor triangles' samples at z > 0.6 of their final order-64 grids (at order 2:
+    // 1 of 6 and 3 of 6), and all 12 of the attic's.
+    let n = 64;
+    let floor_buried: u64 = (0..2)
+        .map(|t| {
+            let [a, b, c] = traced.positions[t];
+            (0..=n)
+                .flat_map(|d| (0..=d).map(move |j| (d - j, j)))
+                .filter(|&(i, j)| {
+                    let (u, w) = (i as f32 / n as f32, j as f32 / n as f32);
+                    buried(a * (1.0 - u - w) + b * u + c * w)
+                })
+                .count() as u64
+        })
+        .sum();
+    assert_eq!(stats.buried, floor_buried + 12);
+    // A grid that is partly buried has an intersection line to resolve: the floor
+    // triangles refine to their maximum order (√2 m × 64 per metre, capped at 64). A grid
+    // buried everywhere shows nothing and stays at order 2; buried samples' own values
+    // never drive refinement (every valid sample here is 5).
     assert_eq!(
         stats.order_histogram.into_iter().collect::<Vec<_>>(),
-        [(2, 4)]
+        [(2, 2), (64, 2)]
     );
     let mut rng = Points(9);
     for _ in 0..200 {
