@@ -108,6 +108,23 @@ fn find_rgb(channels: &[Channel]) -> Option<[&Channel; 3]> {
 /// Reads the first layer's RGB into the display window (pixels outside the data window are
 /// black, with a warning), rejecting NaN and infinities.
 fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> {
+    let bytes = std::fs::read(path).map_err(|e| IoError::read("EXR", path, e))?;
+    let exr_error = |e: exr::error::Error| match e {
+        exr::error::Error::Io(io) => IoError::read("EXR", path, io),
+        other => IoError::read(
+            "EXR",
+            path,
+            format!("not a readable OpenEXR file ({other})"),
+        ),
+    };
+    check_tile_levels(&bytes)
+        .map_err(exr_error)?
+        .map_err(|cause| IoError::exr(path, cause))?;
+    // `no_panic` stays as a safety net: the exr crate states many invariants of the file as
+    // (debug) assertions rather than errors; those found by fuzzing are checked above.
+    // Decompression is sequential: in parallel, exr decompresses on a thread pool of its own
+    // built without a panic handler, where any panic aborts the whole process and `no_panic`
+    // cannot catch it.
     let image = no_panic("EXR decoding", || {
         exr::prelude::read()
             .no_deep_data()
@@ -115,17 +132,11 @@ fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> 
             .all_channels()
             .first_valid_layer()
             .all_attributes()
-            .from_file(path)
+            .non_parallel()
+            .from_buffered(std::io::Cursor::new(&bytes))
     })
     .map_err(|e| IoError::read("EXR", path, e))?
-    .map_err(|e| match e {
-        exr::error::Error::Io(io) => IoError::read("EXR", path, io),
-        other => IoError::read(
-            "EXR",
-            path,
-            format!("not a readable OpenEXR file ({other})"),
-        ),
-    })?;
+    .map_err(exr_error)?;
     let layer: &Layer<AnyChannels<FlatSamples>> = &image.layer_data;
     let channels = &layer.channel_data.list;
     let Some(rgb) = find_rgb(channels) else {
@@ -204,4 +215,37 @@ fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> 
         }
     }
     Ok((w32, h32, texels, warnings))
+}
+
+/// Checks that every tile the offset tables list for the full-resolution level says so in
+/// its own chunk header. The exr crate selects the chunks to read by the offset table but
+/// places their pixels by the level their header names, so a tile claiming another level
+/// reaches the full-resolution buffer (a debug assertion inside exr, and pixels written at
+/// the wrong place without it). Reads the chunks of tiled files only, without decompressing
+/// them; the outer error is the exr crate's, the inner one a cause for [`IoError::exr`].
+fn check_tile_levels(bytes: &[u8]) -> Result<Result<(), String>, exr::error::Error> {
+    use exr::block::chunk::CompressedBlock;
+    use exr::meta::BlockDescription;
+    use exr::prelude::Vec2;
+    let reader = exr::block::read(std::io::Cursor::new(bytes), false)?;
+    let tiled = reader
+        .headers()
+        .iter()
+        .any(|h| matches!(h.blocks, BlockDescription::Tiles(_)));
+    if !tiled {
+        return Ok(Ok(()));
+    }
+    let full = Vec2(0, 0);
+    for chunk in reader.filter_chunks(false, |_, tile, _| tile.level_index == full)? {
+        if let CompressedBlock::Tile(tile) = chunk?.compressed_block
+            && tile.coordinates.level_index != full
+        {
+            let (x, y) = (tile.coordinates.tile_index, tile.coordinates.level_index);
+            return Ok(Err(format!(
+                "tile ({}, {}) is listed for the full-resolution level but names level ({}, {})",
+                x.0, x.1, y.0, y.1
+            )));
+        }
+    }
+    Ok(Ok(()))
 }

@@ -254,9 +254,7 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<gltf::Gltf, IoError> {
             }
         }
     }
-    let parsed = no_panic("glTF parsing", || gltf::Gltf::from_slice(bytes))
-        .map_err(|e| IoError::read("glTF", path, e))?;
-    parsed.map_err(|e| {
+    let gltf_error = |e: gltf::Error| {
         let cause = match &e {
             gltf::Error::Binary(_) => format!("file is truncated or not glTF ({e})"),
             gltf::Error::Deserialize(_) => format!("malformed glTF JSON ({e})"),
@@ -264,7 +262,40 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<gltf::Gltf, IoError> {
             _ => e.to_string(),
         };
         IoError::read("glTF", path, cause)
+    };
+    // Parsing and validation are separate so that what gltf-json's validation indexes without
+    // checking is checked first. `no_panic` stays as a safety net.
+    let gltf::Gltf { document, blob } = no_panic("glTF parsing", || {
+        gltf::Gltf::from_slice_without_validation(bytes)
     })
+    .map_err(|e| IoError::read("glTF", path, e))?
+    .map_err(gltf_error)?;
+    let root = document.into_json();
+    check_before_validation(&root).map_err(|cause| IoError::read("glTF", path, cause))?;
+    let document = no_panic("glTF validation", || gltf::Document::from_json(root))
+        .map_err(|e| IoError::read("glTF", path, e))?
+        .map_err(gltf_error)?;
+    Ok(gltf::Gltf { document, blob })
+}
+
+/// What gltf-json 1.4's validation takes for granted: it looks up each primitive's POSITION
+/// accessor (for its min/max) by indexing, so an out-of-range index would panic there.
+fn check_before_validation(root: &gltf::json::Root) -> Result<(), String> {
+    use gltf::json::validation::Checked;
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            if let Some(acc) = prim.attributes.get(&Checked::Valid(Semantic::Positions))
+                && acc.value() >= root.accessors.len()
+            {
+                return Err(format!(
+                    "invalid glTF document (mesh {m} primitive {p}: POSITION accessor {} does not exist, the file has {})",
+                    acc.value(),
+                    root.accessors.len()
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Loads every buffer: the GLB BIN chunk, a data URI or a file next to the glTF.
@@ -607,6 +638,20 @@ fn decode_image(
         .images()
         .nth(index)
         .ok_or_else(|| format!("image {index} is missing"))?;
+    // `Image::source` unwraps these (gltf 1.4 does not validate them).
+    if let Some(json) = doc.as_json().images.get(index) {
+        match (&json.buffer_view, &json.uri) {
+            (Some(_), _) if json.mime_type.is_none() => {
+                return Err(format!(
+                    "image {index} is in a buffer view but has no mimeType"
+                ));
+            }
+            (None, None) => {
+                return Err(format!("image {index} has neither a uri nor a bufferView"));
+            }
+            _ => {}
+        }
+    }
     let label = match image.source() {
         gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
             format!("image {index} ('{uri}')")
