@@ -1821,11 +1821,21 @@ fn long_run() {
         (2, fuzz_glb),
         (3, fuzz_exr),
     ];
+    // Every target runs even when an earlier one fails (each stops at its first failure).
+    let mut failures = Vec::new();
     for (weight, target) in targets {
         let cases = share(weight);
-        target(cases, seed.wrapping_add(weight));
-        done += cases as u64;
+        match std::panic::catch_unwind(|| target(cases, seed.wrapping_add(weight))) {
+            Ok(_) => done += cases as u64,
+            Err(payload) => failures.push(
+                payload
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .unwrap_or_else(|| "(no message)".into()),
+            ),
+        }
     }
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
     println!(
         "long run: {done} cases in {:.1} s, no panic, no non-finite data",
         started.elapsed().as_secs_f64()
