@@ -19,6 +19,13 @@ pub enum SceneError {
     },
     #[error("mesh '{mesh}': vertex {vertex} has a non-finite normal")]
     NonFiniteNormal { mesh: String, vertex: usize },
+    #[error("mesh '{mesh}': vertex {vertex} has a non-finite {attribute} {uv:?}")]
+    NonFiniteTexcoord {
+        mesh: String,
+        attribute: &'static str,
+        vertex: usize,
+        uv: [f32; 2],
+    },
     #[error(
         "mesh '{mesh}': triangle {triangle} uses vertex {index} but the mesh has {vertex_count} vertices"
     )]
@@ -87,8 +94,8 @@ impl Mesh {
         self.normals = normals;
     }
 
-    /// Checks that every position and normal is finite, every index is in range and every
-    /// attribute has one entry per vertex.
+    /// Checks that every position, normal and texture coordinate is finite, every index is in
+    /// range and every attribute has one entry per vertex.
     pub fn validate(&self) -> Result<(), SceneError> {
         let n = self.positions.len();
         for (vertex, p) in self.positions.iter().enumerate() {
@@ -133,6 +140,16 @@ impl Mesh {
                 mesh: self.name.clone(),
                 vertex,
             });
+        }
+        for (attribute, uvs) in [("TEXCOORD_0", &self.uv0), ("TEXCOORD_1", &self.uv1)] {
+            if let Some(vertex) = uvs.iter().position(|uv| !uv.is_finite()) {
+                return Err(SceneError::NonFiniteTexcoord {
+                    mesh: self.name.clone(),
+                    attribute,
+                    vertex,
+                    uv: uvs[vertex].to_array(),
+                });
+            }
         }
         for (triangle, tri) in self.indices.iter().enumerate() {
             if let Some(&index) = tri.iter().find(|&&i| i as usize >= n) {

@@ -14,6 +14,11 @@ use surfcache_core::glam::Vec3;
 /// Largest image accepted, in pixels (guards allocations against corrupt headers).
 const MAX_PIXELS: usize = 1 << 28;
 
+/// Largest decoded layer accepted, in bytes of samples over all its channels (the exr crate
+/// allocates them all before reading a pixel, so a corrupt header of a tiny file could
+/// otherwise ask for any amount of memory).
+const MAX_SAMPLE_BYTES: usize = 1 << 32;
+
 /// Reads an equirectangular radiance map (CONTRACT.md convention; negative values are
 /// clamped to 0 with one warning).
 pub fn read_environment_map(path: &Path) -> Result<(EnvironmentMap, Vec<String>), IoError> {
@@ -108,6 +113,25 @@ fn find_rgb(channels: &[Channel]) -> Option<[&Channel; 3]> {
 /// Reads the first layer's RGB into the display window (pixels outside the data window are
 /// black, with a warning), rejecting NaN and infinities.
 fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> {
+    let bytes = std::fs::read(path).map_err(|e| IoError::read("EXR", path, e))?;
+    let exr_error = |e: exr::error::Error| match e {
+        exr::error::Error::Io(io) => IoError::read("EXR", path, io),
+        other => IoError::read(
+            "EXR",
+            path,
+            format!("not a readable OpenEXR file ({other})"),
+        ),
+    };
+    no_panic("EXR header check", || check_before_decoding(&bytes))
+        .map_err(|e| IoError::read("EXR", path, e))?
+        .map_err(exr_error)?
+        .map_err(|cause| IoError::exr(path, cause))?;
+    // `no_panic` stays as a safety net: the exr crate states many invariants of the file as
+    // (debug) assertions rather than errors; those found by fuzzing are checked above, and so
+    // are the sizes it would allocate.
+    // Decompression is sequential: in parallel, exr decompresses on a thread pool of its own
+    // built without a panic handler, where any panic aborts the whole process and `no_panic`
+    // cannot catch it.
     let image = no_panic("EXR decoding", || {
         exr::prelude::read()
             .no_deep_data()
@@ -115,17 +139,11 @@ fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> 
             .all_channels()
             .first_valid_layer()
             .all_attributes()
-            .from_file(path)
+            .non_parallel()
+            .from_buffered(std::io::Cursor::new(&bytes))
     })
     .map_err(|e| IoError::read("EXR", path, e))?
-    .map_err(|e| match e {
-        exr::error::Error::Io(io) => IoError::read("EXR", path, io),
-        other => IoError::read(
-            "EXR",
-            path,
-            format!("not a readable OpenEXR file ({other})"),
-        ),
-    })?;
+    .map_err(exr_error)?;
     let layer: &Layer<AnyChannels<FlatSamples>> = &image.layer_data;
     let channels = &layer.channel_data.list;
     let Some(rgb) = find_rgb(channels) else {
@@ -204,4 +222,62 @@ fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> 
         }
     }
     Ok((w32, h32, texels, warnings))
+}
+
+/// What the exr crate takes for granted, checked from the headers and chunk headers before
+/// decoding; the outer error is the exr crate's, the inner one a cause for [`IoError::exr`].
+///
+/// - Window sizes: the data window of every layer (all its channels are allocated up front)
+///   and the display window must stay within [`MAX_PIXELS`] and [`MAX_SAMPLE_BYTES`].
+/// - Tile levels: every tile the offset tables list for the full-resolution level must say
+///   so in its own chunk header. The exr crate selects the chunks to read by the offset table
+///   but places their pixels by the level their header names, so a tile claiming another
+///   level reaches the full-resolution buffer (a debug assertion inside exr, and pixels
+///   written at the wrong place without it). The chunks of tiled files are read for this,
+///   without decompressing them.
+fn check_before_decoding(bytes: &[u8]) -> Result<Result<(), String>, exr::error::Error> {
+    use exr::block::chunk::CompressedBlock;
+    use exr::meta::BlockDescription;
+    use exr::prelude::Vec2;
+    let reader = exr::block::read(std::io::Cursor::new(bytes), false)?;
+    for (i, header) in reader.headers().iter().enumerate() {
+        let Vec2(w, h) = header.layer_size;
+        let pixels = w.saturating_mul(h);
+        let sample_bytes: usize = header
+            .channels
+            .list
+            .iter()
+            .map(|c| c.sample_type.bytes_per_sample())
+            .fold(0, usize::saturating_add);
+        if pixels > MAX_PIXELS || pixels.saturating_mul(sample_bytes) > MAX_SAMPLE_BYTES {
+            return Ok(Err(format!(
+                "layer {i}: unsupported data window size {w}×{h} ({} channels)",
+                header.channels.list.len()
+            )));
+        }
+        let Vec2(w, h) = header.shared_attributes.display_window.size;
+        if w.saturating_mul(h) > MAX_PIXELS {
+            return Ok(Err(format!("unsupported display window size {w}×{h}")));
+        }
+    }
+    let tiled = reader
+        .headers()
+        .iter()
+        .any(|h| matches!(h.blocks, BlockDescription::Tiles(_)));
+    if !tiled {
+        return Ok(Ok(()));
+    }
+    let full = Vec2(0, 0);
+    for chunk in reader.filter_chunks(false, |_, tile, _| tile.level_index == full)? {
+        if let CompressedBlock::Tile(tile) = chunk?.compressed_block
+            && tile.coordinates.level_index != full
+        {
+            let (x, y) = (tile.coordinates.tile_index, tile.coordinates.level_index);
+            return Ok(Err(format!(
+                "tile ({}, {}) is listed for the full-resolution level but names level ({}, {})",
+                x.0, x.1, y.0, y.1
+            )));
+        }
+    }
+    Ok(Ok(()))
 }

@@ -118,7 +118,8 @@ pub fn load_gltf(path: &Path) -> Result<LoadedScene, IoError> {
     let mut materials: HashMap<Option<usize>, Arc<Material>> = HashMap::new();
     for key in &used_materials {
         let material = match key.and_then(|i| doc.materials().nth(i)) {
-            Some(m) => convert_material(&m, &textures, &mut report.warnings),
+            Some(m) => convert_material(&m, &textures, &mut report.warnings)
+                .map_err(|e| IoError::gltf(path, e))?,
             None => default_material(),
         };
         materials.insert(*key, Arc::new(material));
@@ -203,6 +204,23 @@ pub fn load_gltf(path: &Path) -> Result<LoadedScene, IoError> {
         ));
     }
     scene.validate().map_err(|e| IoError::gltf(path, e))?;
+    // Finite positions under finite transforms can still overflow in world space.
+    for inst in &scene.instances {
+        if let Some(v) = inst
+            .mesh
+            .positions
+            .iter()
+            .position(|&p| !inst.transform.transform_point3(p).is_finite())
+        {
+            return Err(IoError::gltf(
+                path,
+                format!(
+                    "instance '{}': vertex {v} of mesh '{}' lies at a non-finite world position (the node transforms overflow)",
+                    inst.name, inst.mesh.name
+                ),
+            ));
+        }
+    }
     Ok(LoadedScene { scene, report })
 }
 
@@ -254,9 +272,7 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<gltf::Gltf, IoError> {
             }
         }
     }
-    let parsed = no_panic("glTF parsing", || gltf::Gltf::from_slice(bytes))
-        .map_err(|e| IoError::read("glTF", path, e))?;
-    parsed.map_err(|e| {
+    let gltf_error = |e: gltf::Error| {
         let cause = match &e {
             gltf::Error::Binary(_) => format!("file is truncated or not glTF ({e})"),
             gltf::Error::Deserialize(_) => format!("malformed glTF JSON ({e})"),
@@ -264,7 +280,40 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<gltf::Gltf, IoError> {
             _ => e.to_string(),
         };
         IoError::read("glTF", path, cause)
+    };
+    // Parsing and validation are separate so that what gltf-json's validation indexes without
+    // checking is checked first. `no_panic` stays as a safety net.
+    let gltf::Gltf { document, blob } = no_panic("glTF parsing", || {
+        gltf::Gltf::from_slice_without_validation(bytes)
     })
+    .map_err(|e| IoError::read("glTF", path, e))?
+    .map_err(gltf_error)?;
+    let root = document.into_json();
+    check_before_validation(&root).map_err(|cause| IoError::read("glTF", path, cause))?;
+    let document = no_panic("glTF validation", || gltf::Document::from_json(root))
+        .map_err(|e| IoError::read("glTF", path, e))?
+        .map_err(gltf_error)?;
+    Ok(gltf::Gltf { document, blob })
+}
+
+/// What gltf-json 1.4's validation takes for granted: it looks up each primitive's POSITION
+/// accessor (for its min/max) by indexing, so an out-of-range index would panic there.
+fn check_before_validation(root: &gltf::json::Root) -> Result<(), String> {
+    use gltf::json::validation::Checked;
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            if let Some(acc) = prim.attributes.get(&Checked::Valid(Semantic::Positions))
+                && acc.value() >= root.accessors.len()
+            {
+                return Err(format!(
+                    "invalid glTF document (mesh {m} primitive {p}: POSITION accessor {} does not exist, the file has {})",
+                    acc.value(),
+                    root.accessors.len()
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Loads every buffer: the GLB BIN chunk, a data URI or a file next to the glTF.
@@ -514,7 +563,7 @@ fn decode_primitive(
         let mut computed: Option<Vec<Vec3>> = None;
         for v in 0..m.normals.len() {
             let len = m.normals[v].length();
-            if len > 1e-12 {
+            if len > 1e-12 && len.is_finite() {
                 m.normals[v] /= len;
             } else {
                 let c = computed.get_or_insert_with(|| {
@@ -528,7 +577,7 @@ fn decode_primitive(
         }
         if fixed > 0 {
             out.warnings.push(format!(
-                "mesh '{name}': {fixed} zero-length normals replaced by computed ones"
+                "mesh '{name}': {fixed} zero-length or overflowing normals replaced by computed ones"
             ));
         }
     } else {
@@ -549,14 +598,29 @@ fn convert_material(
     m: &gltf::Material<'_>,
     textures: &HashMap<usize, Arc<Texture>>,
     warnings: &mut Vec<String>,
-) -> Material {
+) -> Result<Material, String> {
     let name = m
         .name()
         .map(str::to_string)
         .unwrap_or_else(|| format!("material{}", m.index().unwrap_or(0)));
     let pbr = m.pbr_metallic_roughness();
     let base = Vec4::from_array(pbr.base_color_factor());
-    let metallic = pbr.metallic_factor().clamp(0.0, 1.0);
+    let metallic = pbr.metallic_factor();
+    let strength = m.emissive_strength().unwrap_or(1.0);
+    let emission = Vec3::from_array(m.emissive_factor()) * strength;
+    let cutoff = m.alpha_cutoff().unwrap_or(0.5);
+    // JSON has no NaN or infinity, but numbers beyond f32's range parse as infinities.
+    for (what, finite) in [
+        ("baseColorFactor", base.is_finite()),
+        ("metallicFactor", metallic.is_finite()),
+        ("emissiveFactor × emissiveStrength", emission.is_finite()),
+        ("alphaCutoff", cutoff.is_finite()),
+    ] {
+        if !finite {
+            return Err(format!("material '{name}': {what} is not finite"));
+        }
+    }
+    let metallic = metallic.clamp(0.0, 1.0);
     let mut texture = |info: Option<gltf::texture::Info<'_>>, slot: &str| {
         let info = info?;
         if info.tex_coord() != 0 {
@@ -569,21 +633,20 @@ fn convert_material(
     };
     let albedo_texture = texture(pbr.base_color_texture(), "baseColorTexture");
     let emission_texture = texture(m.emissive_texture(), "emissiveTexture");
-    let strength = m.emissive_strength().unwrap_or(1.0);
-    Material {
+    Ok(Material {
         albedo: base.truncate() * (1.0 - metallic),
         alpha: base.w,
         albedo_texture,
-        emission: Vec3::from_array(m.emissive_factor()) * strength,
+        emission,
         emission_texture,
         double_sided: m.double_sided(),
         alpha_mode: match m.alpha_mode() {
             gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
-            gltf::material::AlphaMode::Mask => AlphaMode::Mask(m.alpha_cutoff().unwrap_or(0.5)),
+            gltf::material::AlphaMode::Mask => AlphaMode::Mask(cutoff),
             gltf::material::AlphaMode::Blend => AlphaMode::Blend,
         },
         name,
-    }
+    })
 }
 
 /// The exact sRGB EOTF (IEC 61966-2-1) of an encoded value in [0, 1].
@@ -607,6 +670,20 @@ fn decode_image(
         .images()
         .nth(index)
         .ok_or_else(|| format!("image {index} is missing"))?;
+    // `Image::source` unwraps these (gltf 1.4 does not validate them).
+    if let Some(json) = doc.as_json().images.get(index) {
+        match (&json.buffer_view, &json.uri) {
+            (Some(_), _) if json.mime_type.is_none() => {
+                return Err(format!(
+                    "image {index} is in a buffer view but has no mimeType"
+                ));
+            }
+            (None, None) => {
+                return Err(format!("image {index} has neither a uri nor a bufferView"));
+            }
+            _ => {}
+        }
+    }
     let label = match image.source() {
         gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
             format!("image {index} ('{uri}')")
@@ -721,6 +798,9 @@ fn convert_light(def: &json_lights::Light, world: &Affine3A) -> Result<Light, St
         return Err("color × intensity is not finite; ignored".into());
     }
     let position = Vec3::from(world.translation);
+    if !position.is_finite() {
+        return Err("the node transform gives no finite position; ignored".into());
+    }
     let direction = world.transform_vector3(Vec3::NEG_Z).normalize_or_zero();
     let needs_direction = || {
         if direction == Vec3::ZERO || !direction.is_finite() {
@@ -744,6 +824,9 @@ fn convert_light(def: &json_lights::Light, world: &Affine3A) -> Result<Light, St
                 .as_ref()
                 .map(|s| (s.inner_cone_angle, s.outer_cone_angle))
                 .unwrap_or((0.0, std::f32::consts::FRAC_PI_4));
+            if !(inner.is_finite() && outer.is_finite()) {
+                return Err("spot cone angles are not finite; ignored".into());
+            }
             Ok(Light::Spot {
                 position,
                 direction: needs_direction()?,
