@@ -1145,7 +1145,7 @@ fn rich_seed() -> GltfSeed {
     nodes.push(json!({ "name": "point", "translation": [0.27, 0.5, 0.27],
         "extensions": { "KHR_lights_punctual": { "light": 0 } } }));
     nodes.push(json!({ "name": "spot", "translation": [0.27, 0.54, 0.27],
-        "rotation": [-0.7071068, 0.0, 0.0, 0.7071068],
+        "rotation": [-std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2],
         "extensions": { "KHR_lights_punctual": { "light": 1 } } }));
     nodes.push(
         json!({ "name": "sun", "rotation": [-0.3826834, 0.0, 0.0, 0.9238795],

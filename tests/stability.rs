@@ -18,7 +18,7 @@ use std::f32::consts::PI;
 use std::path::Path;
 use std::sync::Arc;
 use surfcache::cache::{
-    CacheSettings, IrradianceMapSettings, IrradianceMaps, LightmapSettings, Lightmaps,
+    Cache, CacheSettings, IrradianceMapSettings, IrradianceMaps, LightmapSettings, Lightmaps,
     SurfaceCache, VertexLighting, VertexLightingSettings,
     bake::{BakeJob, BakeSettings, FLOOR_FRACTION, bake_to_convergence},
 };
@@ -536,7 +536,8 @@ fn dark_niche_black_blotches_and_how_gathering_removes_them() {
     let mut job = BakeJob::new(settings);
     while !job.step(&scene, 4096) {}
     let floor = job.floor().expect("the job measured the scene");
-    let maps = job.into_cache().expect("the bake finished");
+    let outcome = job.into_outcome().expect("the bake finished");
+    let maps: &Cache = outcome.cache();
 
     // The deep end: the tunnel's end wall, its floor, ceiling and sides near it; and the
     // shaft, for comparison.
@@ -555,7 +556,7 @@ fn dark_niche_black_blotches_and_how_gathering_removes_them() {
     let points: Vec<(Vec3, Vec3)> = deep.iter().chain(&shaft).copied().collect();
     let refs = reference(&scene, &points, 16384);
     for (&(x, n), r) in points.iter().zip(&refs) {
-        let e = lookup(&maps, &scene, x, n).y;
+        let e = lookup(maps, &scene, x, n).y;
         let (t, uv, front) = locate(&scene, x, n);
         let samples = maps.diagnostic(t, uv, front).samples;
         eprintln!(

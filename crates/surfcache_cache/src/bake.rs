@@ -63,20 +63,43 @@ pub fn sample_frame(scene: &TracedScene, site: &SampleSite) -> (SurfacePoint, Ve
 /// `site` of an edited scene `new` as the scene `old` before the edit had it (same
 /// barycentrics on the corresponding triangle, the same mesh vertex for vertex sites);
 /// `None` for a site without a counterpart.
-pub fn map_site(old: &TracedScene, new: &TracedScene, site: &SampleSite, triangle_map: &[u32]) -> Option<SampleSite> {
+pub fn map_site(
+    old: &TracedScene,
+    new: &TracedScene,
+    site: &SampleSite,
+    triangle_map: &[u32],
+) -> Option<SampleSite> {
     match *site {
-        SampleSite::Surface { triangle, uv, front } => {
+        SampleSite::Surface {
+            triangle,
+            uv,
+            front,
+        } => {
             let t = *triangle_map.get(triangle as usize)?;
-            (t != UNMAPPED).then_some(SampleSite::Surface { triangle: t, uv, front })
+            (t != UNMAPPED).then_some(SampleSite::Surface {
+                triangle: t,
+                uv,
+                front,
+            })
         }
-        SampleSite::Vertex { triangle, corner, front } => {
+        SampleSite::Vertex {
+            triangle,
+            corner,
+            front,
+        } => {
             let t = *triangle_map.get(triangle as usize)?;
             if t == UNMAPPED {
                 return None;
             }
             let vertex = new.vertex_indices[triangle as usize][corner as usize];
-            let corner = old.vertex_indices[t as usize].iter().position(|&v| v == vertex)? as u8;
-            Some(SampleSite::Vertex { triangle: t, corner, front })
+            let corner = old.vertex_indices[t as usize]
+                .iter()
+                .position(|&v| v == vertex)? as u8;
+            Some(SampleSite::Vertex {
+                triangle: t,
+                corner,
+                front,
+            })
         }
     }
 }
@@ -399,7 +422,9 @@ pub struct BakeOutcome {
 impl BakeOutcome {
     /// The final cache.
     pub fn cache(&self) -> &Arc<Cache> {
-        self.passes.last().expect("a bake has at least its final pass")
+        self.passes
+            .last()
+            .expect("a bake has at least its final pass")
     }
 }
 

@@ -103,7 +103,10 @@ impl IncrementalJob {
     fn start_stage(&mut self, scene: &Arc<TracedScene>) {
         let settings = self.before.settings;
         let (lo, hi) = self.edit.region;
-        let sphere = (0.5 * (lo + hi), 0.5 * (hi - lo).length() + scene.spawn_offset());
+        let sphere = (
+            0.5 * (lo + hi),
+            0.5 * (hi - lo).length() + scene.spawn_offset(),
+        );
         let baker = if self.stage == 0 {
             let cache = self
                 .before

@@ -164,7 +164,11 @@ pub const UNMAPPED: u32 = u32::MAX;
 /// index of new triangle `t_new`, or [`UNMAPPED`]. Instances correspond when
 /// `instance_map[i_new] = Some(i_old)`; their triangles then correspond when both have the
 /// same mesh triangle (`local_triangle`), e.g. the same mesh moved or re-coloured.
-pub fn triangle_map(old: &TracedScene, new: &TracedScene, instance_map: &[Option<u32>]) -> Vec<u32> {
+pub fn triangle_map(
+    old: &TracedScene,
+    new: &TracedScene,
+    instance_map: &[Option<u32>],
+) -> Vec<u32> {
     let mut map = vec![UNMAPPED; new.triangle_count()];
     for (i_new, range) in new.instance_triangles.iter().enumerate() {
         let Some(i_old) = instance_map.get(i_new).copied().flatten() else {
@@ -258,6 +262,9 @@ impl CacheSettings {
 }
 
 /// One of the three caches, chosen at run time; stored in bake archives.
+// A cache is a few large arrays behind a small header and lives behind an `Arc`, so the
+// header's size difference between variants costs nothing worth a box.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub enum Cache {
     Vertex(VertexLighting),

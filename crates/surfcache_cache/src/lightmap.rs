@@ -18,7 +18,8 @@
 //! - **Storage.** RGB9E5 (4 bytes a texel) with one power-of-two [`Rgb9e5Scale`].
 
 use crate::{
-    CacheStats, Diagnostic, IrradianceTexture, Method, UNMAPPED, SamplePoint, SampleSite, SurfaceCache,
+    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
+    UNMAPPED,
     charts::{self, TEXEL_EPSILON},
     rgb9e5::Rgb9e5Scale,
 };
@@ -157,7 +158,11 @@ impl Lightmaps {
     }
 
     /// Concatenates the instances' layouts into the flat arrays of a layer.
-    fn from_instances(scene: &TracedScene, settings: LightmapSettings, built: Vec<BuiltInstance>) -> Self {
+    fn from_instances(
+        scene: &TracedScene,
+        settings: LightmapSettings,
+        built: Vec<BuiltInstance>,
+    ) -> Self {
         let n = scene.triangle_count();
         let mut maps = Vec::with_capacity(built.len());
         let mut uv1 = Vec::with_capacity(n);
@@ -225,7 +230,12 @@ impl Lightmaps {
 
     /// Instance `io`'s finished layout, for the same mesh placed again with its triangles
     /// starting at traced index `first_triangle`.
-    fn instance_layout(&self, scene: &TracedScene, io: usize, first_triangle: u32) -> BuiltInstance {
+    fn instance_layout(
+        &self,
+        scene: &TracedScene,
+        io: usize,
+        first_triangle: u32,
+    ) -> BuiltInstance {
         let m = self.maps[io];
         let range = scene.instance_triangles[io].clone();
         let (start, end) = (range.start as usize, range.end as usize);
@@ -233,7 +243,13 @@ impl Lightmaps {
         let base = charts.iter().copied().min().unwrap_or(0);
         let owner = self.owner[m.offset..m.offset + m.texels()]
             .iter()
-            .map(|&t| if t == NONE { NONE } else { t - range.start + first_triangle })
+            .map(|&t| {
+                if t == NONE {
+                    NONE
+                } else {
+                    t - range.start + first_triangle
+                }
+            })
             .collect();
         BuiltInstance {
             map: m,
@@ -686,15 +702,19 @@ impl SurfaceCache for Lightmaps {
         let built: Vec<BuiltInstance> = (0..new.instance_triangles.len())
             .map(|i| {
                 let range = new.instance_triangles[i].clone();
-                let first_old = triangle_map.get(range.start as usize).copied().unwrap_or(UNMAPPED);
+                let first_old = triangle_map
+                    .get(range.start as usize)
+                    .copied()
+                    .unwrap_or(UNMAPPED);
                 let i_old = old.instance.get(first_old as usize).map(|&k| k as usize);
                 let one_to_one = i_old.is_some_and(|io| {
                     let old_range = &old.instance_triangles[io];
                     old_range.len() == range.len()
                         && old.mirrored[io] == new.mirrored[i]
-                        && range.clone().enumerate().all(|(k, t)| {
-                            triangle_map[t as usize] == old_range.start + k as u32
-                        })
+                        && range
+                            .clone()
+                            .enumerate()
+                            .all(|(k, t)| triangle_map[t as usize] == old_range.start + k as u32)
                         && !self.owner.is_empty()
                 });
                 match i_old.filter(|_| one_to_one) {

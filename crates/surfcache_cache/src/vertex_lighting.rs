@@ -25,8 +25,8 @@
 //! barycentric interpolation exactly.
 
 use crate::{
-    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache, UNMAPPED,
-    irradiance_map::EstimateTotals, mesh_colour, rgb9e5::Rgb9e5Scale,
+    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
+    UNMAPPED, irradiance_map::EstimateTotals, mesh_colour, rgb9e5::Rgb9e5Scale,
 };
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};

@@ -362,12 +362,12 @@ pub fn estimate_change(
         };
     }
     let mut punctual_rays = 0;
-    let punctual_new = new
-        .scene
-        .punctual_irradiance_from(&new.point, new.origin, &mut punctual_rays);
-    let punctual_old = old
-        .scene
-        .punctual_irradiance_from(&old.point, old.origin, &mut punctual_rays);
+    let punctual_new =
+        new.scene
+            .punctual_irradiance_from(&new.point, new.origin, &mut punctual_rays);
+    let punctual_old =
+        old.scene
+            .punctual_irradiance_from(&old.point, old.origin, &mut punctual_rays);
     let mut e = sample_adaptively(
         settings,
         seed,
@@ -379,7 +379,11 @@ pub fn estimate_change(
             let mut twin = rng.clone();
             let (x_new, path_new) = hemisphere_sample(new, settings, root, rng, focus);
             let (x_old, path_old) = hemisphere_sample(old, settings, root, &mut twin, focus);
-            (x_new - x_old, path_new.first_hit, path_new.rays + path_old.rays)
+            (
+                x_new - x_old,
+                path_new.first_hit,
+                path_new.rays + path_old.rays,
+            )
         },
     );
     e.rays += punctual_rays as u64;

@@ -182,7 +182,10 @@ pub fn run(args: BakeArgs) -> Result<()> {
         let mut outcome = job
             .into_outcome()
             .context("internal error: the bake did not finish")?;
-        let cache = outcome.passes.pop().context("internal error: no final pass")?;
+        let cache = outcome
+            .passes
+            .pop()
+            .context("internal error: no final pass")?;
         let cache = Arc::try_unwrap(cache).unwrap_or_else(|shared| (*shared).clone());
         Ok((cache, outcome.progress, outcome.settings))
     })??;
