@@ -2,7 +2,7 @@
 //!
 //! A re-bake starts from the finished cache of the scene before the edit, remapped onto
 //! the edited scene ([`SurfaceCache::remap`]: samples of surviving triangles keep their
-//! values as priors, new triangles get fresh samples), and updates it in two stages of
+//! values as priors, new triangles get fresh samples), and updates it in stages of
 //! *correlated sampling* ([`surfcache_trace::estimate_change`]), the perturbation of
 //! one-bounce gathering:
 //!
@@ -14,18 +14,26 @@
 //!    MIS restricted to the cone; it is exactly zero, with no ray traced, where the cone
 //!    lies below the surface. Fresh samples are estimated in full, gathering from the old
 //!    cache.
-//! 2. **Indirect change.** Surfaces whose irradiance changed in stage 1 (a shadow that
-//!    moved, a wall that sees the moved object) relight everything that sees them: every
-//!    sample adds `∫ ρ/π · (E_1(y) − E_old(y)) ⟨ν, ω⟩ dω`, estimated with the same
-//!    directions for both lookups in the edited scene (exactly zero where no seen surface
-//!    changed).
+//! 2. **Indirect change**, [`INDIRECT_STAGES`] times. Surfaces whose irradiance changed
+//!    in the stage before (a shadow that moved, a wall that sees the moved object, the
+//!    moved object itself, whose first-stage radiance was its old one) relight
+//!    everything that sees them: stage k adds `∫ ρ/π · (E_k(y) − E_{k−1}(y)) ⟨ν, ω⟩ dω`
+//!    (E_0 = the old cache), estimated with the same directions for both lookups in the
+//!    edited scene: exactly zero where no seen surface changed. Each stage carries the
+//!    change one bounce further; the residual shrinks by the albedo times the share of
+//!    the hemisphere that changed. Three stages matter where two surfaces end up facing
+//!    each other closely (the Cornell box's short block moved next to the tall one: one
+//!    stage left 4 % relative RMS against a fresh bake, three leave 1.6 %, at a noise
+//!    floor of 1.2 % between two fresh bakes with different seeds).
 //!
-//! Left out: changes that reach a sample over three or more bounces off the edited
-//! region, i.e. `ρ/π ∫ (E_new − E_1)(y)` — at most the largest albedo times the largest
-//! stage-2 change, a second-order fraction of the edit's effect; and the noise of both
-//! change estimates, bounded by [`surfcache_trace::irradiance::CHANGE_ERROR_SHARE`] of
-//! the error bound each. Refinement (irradiance maps) continues as in a full bake where
-//! the updated values call for it.
+//! Points where estimating the change is dearer than estimating E afresh (a shadow moved
+//! onto them) are estimated afresh ([`surfcache_trace::estimate_change`]).
+//!
+//! Left out: changes that reach a sample over more bounces off the edited region than
+//! the stages carry, i.e. `ρ/π ∫ (E_new − E_last)(y)`; and the noise of the change
+//! estimates, bounded by [`surfcache_trace::irradiance::CHANGE_ERROR_SHARE`] of the
+//! error bound each. Refinement (irradiance maps) continues as in a full bake where the
+//! updated values call for it.
 
 use crate::{
     Cache, SurfaceCache, UNMAPPED,
@@ -35,6 +43,10 @@ use glam::{Vec2, Vec3};
 use std::sync::Arc;
 use surfcache_core::sampling::splitmix64;
 use surfcache_trace::{IrradianceLookup, TracedScene};
+
+/// Indirect-change stages after the direct one: each propagates the previous stage's
+/// change by one more bounce (module docs).
+pub const INDIRECT_STAGES: u32 = 3;
 
 /// What an edit changed, in the terms a re-bake needs.
 #[derive(Clone, Debug)]
@@ -69,7 +81,8 @@ pub struct IncrementalJob {
     edit: Edit,
     stage: u32,
     baker: Option<Baker<Cache>>,
-    direct: Option<Arc<Cache>>,
+    /// The cache after each finished stage.
+    stages: Vec<Arc<Cache>>,
     done: JobProgress,
     result: Option<Arc<Cache>>,
 }
@@ -84,9 +97,9 @@ impl IncrementalJob {
             edit,
             stage: 0,
             baker: None,
-            direct: None,
+            stages: Vec::new(),
             done: JobProgress {
-                passes: 2,
+                passes: 1 + INDIRECT_STAGES,
                 ..Default::default()
             },
             result: None,
@@ -121,19 +134,24 @@ impl IncrementalJob {
                     focus: Some(sphere),
                 })
         } else {
-            let direct = self.direct.clone().expect("stage 1 follows stage 0");
+            let k = self.stage as usize;
+            let latest = self.stages[k - 1].clone();
+            let before: Arc<dyn IrradianceLookup + Send> = match k {
+                1 => self.old_lookup(),
+                _ => self.stages[k - 2].clone(),
+            };
             let identity: Arc<Vec<u32>> = Arc::new((0..scene.triangle_count() as u32).collect());
-            let cache = direct.remap(scene, scene, &identity);
+            let cache = latest.remap(scene, scene, &identity);
             Baker::new(
                 cache,
                 settings.estimator,
-                settings.seed ^ splitmix64(0x696e_6469_7265_6374),
+                settings.seed ^ splitmix64(0x696e_6469_7265_6374 + k as u64),
             )
-            .with_gather(direct)
+            .with_gather(latest)
             .with_previous(Previous {
                 scene: scene.clone(),
                 triangle_map: identity,
-                gather: Some(self.old_lookup()),
+                gather: Some(before),
                 focus: None,
             })
         };
@@ -164,9 +182,9 @@ impl IncrementalJob {
         self.done.pass = self.stage;
         self.done.current = p;
         let cache = Arc::new(baker.into_cache());
-        if self.stage == 0 {
-            self.direct = Some(cache);
-            self.stage = 1;
+        if self.stage < INDIRECT_STAGES {
+            self.stages.push(cache);
+            self.stage += 1;
             return false;
         }
         self.result = Some(cache);
@@ -176,10 +194,10 @@ impl IncrementalJob {
 
     /// The cache after stage 0 (the direct change), once that stage is done.
     pub fn direct_stage(&self) -> Option<&Arc<Cache>> {
-        self.direct.as_ref()
+        self.stages.first()
     }
 
-    /// Progress so far (stage 0: direct change, stage 1: indirect change).
+    /// Progress so far (stage 0: direct change, later stages: indirect change).
     pub fn progress(&self) -> JobProgress {
         let mut p = self.done;
         if let Some(b) = &self.baker {

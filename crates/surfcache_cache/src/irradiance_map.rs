@@ -80,7 +80,7 @@
 
 use crate::{
     CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
-    mesh_colour, rgb9e5::Rgb9e5Scale,
+    UNMAPPED, mesh_colour, rgb9e5::Rgb9e5Scale,
 };
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
@@ -300,6 +300,13 @@ struct Working {
     filled_error: Vec<Vec3>,
     /// Burial state ([`BURIED`] for buried samples, [`VALID`] otherwise).
     burial: Vec<u8>,
+    /// Order (log2) of each grid slot's first round; empty: order 2 everywhere.
+    start_log2: Vec<u8>,
+    /// Re-bakes: values of the maps before an edit, grid by grid, for the first round
+    /// ([`SamplePoint::prior`]); `prior_offsets[g]` is grid slot g's first, or
+    /// `u32::MAX` for a grid without one.
+    priors: Vec<Vec3>,
+    prior_offsets: Vec<u32>,
 }
 
 /// Per-triangle adaptive irradiance maps (module docs).
@@ -504,10 +511,18 @@ impl SurfaceCache for IrradianceMaps {
                 0 => 0,
                 l => 1u32 << l,
             };
-            let n = if coarse == 0 { 2 } else { 2 * coarse };
+            let n = if coarse == 0 {
+                1 << w.start_log2.get(g as usize).copied().unwrap_or(1)
+            } else {
+                2 * coarse
+            };
             let key = scene.triangle_key(t);
             let inv = 1.0 / n as f32;
-            for_each_new_sample(coarse, n, |i, j, _| {
+            let prior_base = match w.prior_offsets.get(g as usize) {
+                Some(&o) if coarse == 0 && o != u32::MAX => Some(o as usize),
+                _ => None,
+            };
+            for_each_new_sample(coarse, n, |i, j, m| {
                 points.push(SamplePoint {
                     site: SampleSite::Surface {
                         triangle: t,
@@ -515,7 +530,7 @@ impl SurfaceCache for IrradianceMaps {
                         front,
                     },
                     key: sample_key(key, front, i, j, n),
-                    prior: None,
+                    prior: prior_base.map(|b| w.priors[b + m]),
                 });
             });
         }
@@ -540,7 +555,12 @@ impl SurfaceCache for IrradianceMaps {
         let slots = self.log2_orders.len();
         let mut new_log2 = self.log2_orders.clone();
         for &g in &w.pending {
-            new_log2[g as usize] += 1;
+            let l = &mut new_log2[g as usize];
+            *l = if *l == 0 {
+                w.start_log2.get(g as usize).copied().unwrap_or(1)
+            } else {
+                *l + 1
+            };
         }
         let order_of = |l: u8| if l == 0 { 0 } else { 1u32 << l };
         let mut offsets = vec![0u32; slots];
@@ -632,6 +652,9 @@ impl SurfaceCache for IrradianceMaps {
         }
         w.pending.clear();
         w.pending_points = 0;
+        // Priors serve the first round only.
+        w.priors = Vec::new();
+        w.prior_offsets = Vec::new();
         // Pack: RGB9E5 with a scale for the largest value.
         let max = w.filled.iter().fold(0.0f32, |m, v| m.max(v.max_element()));
         self.scale = Rgb9e5Scale::for_max(max);
@@ -655,9 +678,42 @@ impl SurfaceCache for IrradianceMaps {
         })
     }
 
-    /// For now lays the maps out afresh: an edited scene is re-baked in full.
-    fn remap(&self, _old: &TracedScene, new: &TracedScene, _triangle_map: &[u32]) -> Self {
-        Self::new(new, self.settings)
+    /// Every grid of a surviving triangle starts at its order before the edit, all its
+    /// samples asked for again with their values as priors (buried ones with the values
+    /// filled in from their neighbours: the re-bake finds them buried again and refills
+    /// them); grids of new triangles start afresh at order 2. Refinement then continues
+    /// as in a full bake, so a grid the edit gave new detail (a shadow edge) doubles.
+    fn remap(&self, _old: &TracedScene, new: &TracedScene, triangle_map: &[u32]) -> Self {
+        let mut fresh = Self::new(new, self.settings);
+        let slots = fresh.log2_orders.len();
+        let mut start_log2 = vec![1u8; slots];
+        let mut prior_offsets = vec![u32::MAX; slots];
+        let mut priors = Vec::new();
+        for g in 0..slots {
+            let (t, front) = ((g / 2) as u32, g % 2 == 0);
+            let t_old = triangle_map[t as usize];
+            if t_old == UNMAPPED {
+                continue;
+            }
+            let n = self.order(t_old, front);
+            if n == 0 {
+                continue;
+            }
+            start_log2[g] = n.trailing_zeros() as u8;
+            prior_offsets[g] = priors.len() as u32;
+            let base = self.offsets[Self::slot(t_old, front)] as usize;
+            priors.extend(
+                self.packed[base..base + grid_size(n)]
+                    .iter()
+                    .map(|&p| self.scale.unpack(p)),
+            );
+        }
+        if let Some(w) = fresh.working.as_mut() {
+            w.start_log2 = start_log2;
+            w.priors = priors;
+            w.prior_offsets = prior_offsets;
+        }
+        fresh
     }
 
     fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic {

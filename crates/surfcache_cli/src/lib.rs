@@ -6,11 +6,16 @@
 //! Errors print as one line on stderr with a non-zero exit status.
 
 mod bake_dir;
-mod camera;
+pub mod camera;
 mod commands;
-mod picture;
+pub mod picture;
 mod points;
 mod scene_args;
+
+pub use commands::{
+    compare::{Comparison, compare},
+    render::{render_view, surface_radiance},
+};
 
 use clap::Parser;
 use std::process::ExitCode;

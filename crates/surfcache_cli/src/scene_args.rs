@@ -6,7 +6,7 @@ use clap::Args;
 use glam::Vec3;
 use std::{path::PathBuf, sync::Arc};
 use surfcache_core::{Environment, Scene};
-use surfcache_ecs::{SurfcachePlugin, TracedSceneResource, spawn_scene};
+use surfcache_ecs::{BakeConfig, SurfcachePlugin, TracedSceneResource, spawn_scene};
 use surfcache_trace::TracedScene;
 
 /// Environment options (CONTRACT.md).
@@ -60,9 +60,11 @@ impl EnvArgs {
     }
 }
 
-/// A scene loaded into a `bevy_ecs` world with the surfcache schedule run once.
+/// A scene loaded into a `bevy_ecs` world, run until its BVH was built (baking off until
+/// a command turns it on in [`BakeConfig`]).
 pub struct LoadedWorld {
     pub world: World,
+    pub schedule: Schedule,
     /// The scene as loaded (environment options applied), its instances in the traced
     /// scene's order.
     pub scene: Scene,
@@ -95,15 +97,26 @@ impl LoadedWorld {
         env.apply(&mut scene)?;
         let mut world = World::new();
         let mut schedule = Schedule::default();
-        SurfcachePlugin.build(&mut world, &mut schedule);
+        SurfcachePlugin::with_config(BakeConfig {
+            enabled: false,
+            ..Default::default()
+        })
+        .build(&mut world, &mut schedule);
         let spawned = spawn_scene(&mut world, &scene);
         let name = scene.name.clone();
-        schedule.run(&mut world);
-        world.clear_trackers();
-        let resource = world.resource::<TracedSceneResource>();
-        if let Some(e) = &resource.error {
-            return Err(anyhow!("scene '{scene_arg}': {e}"));
+        // The BVH is built in the background; wait for it.
+        loop {
+            SurfcachePlugin::update(&mut world, &mut schedule);
+            let resource = world.resource::<TracedSceneResource>();
+            if let Some(e) = &resource.error {
+                return Err(anyhow!("scene '{scene_arg}': {e}"));
+            }
+            if resource.scene().is_some() {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(1));
         }
+        let resource = world.resource::<TracedSceneResource>();
         // Keep the plain scene's instances in the traced scene's (entity) order.
         let index: std::collections::HashMap<_, _> =
             spawned.iter().enumerate().map(|(i, e)| (*e, i)).collect();
@@ -115,7 +128,12 @@ impl LoadedWorld {
             instances.push(scene.instances[*i].clone());
         }
         scene.instances = instances;
-        Ok(Self { world, scene, name })
+        Ok(Self {
+            world,
+            schedule,
+            scene,
+            name,
+        })
     }
 
     /// The traced scene the BVH system built.

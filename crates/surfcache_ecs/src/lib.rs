@@ -3,30 +3,50 @@
 //! The scene *is* the ECS world: every mesh instance is an entity with [`MeshGeometry`],
 //! [`SurfaceMaterial`] and [`WorldTransform`]; punctual lights carry [`PunctualLight`];
 //! the sky is an entity with [`EnvironmentLight`]. [`SurfcachePlugin::build`] registers the
-//! systems in ordered [`SurfcacheSet`]s: scene sync → BVH → (invalidation → bake step →
-//! publish, as the caches land). Systems are thin: they move data between components and
-//! the ECS-free math in `surfcache_core` and `surfcache_trace`.
+//! systems in ordered [`SurfcacheSet`]s: scene sync → BVH build → invalidation → bake step
+//! → publish. The BVH build and the bake run in the background; the finished surface
+//! cache lands in [`SurfaceCacheResource`], its textures per entity in
+//! [`PublishedLightmaps`], and a [`BakeFinished`] message says so. Edits re-bake
+//! incrementally ([`baking`] documents the policy). Systems are thin: they move data
+//! between components, resources and the ECS-free math of the other crates.
 //!
 //! ```
 //! use bevy_ecs::prelude::*;
 //! use surfcache_core::scenes;
-//! use surfcache_ecs::{SurfcachePlugin, TracedSceneResource, spawn_scene};
+//! use surfcache_ecs::{BakeConfig, PublishedLightmaps, SurfcachePlugin, spawn_scene};
 //!
 //! let mut world = World::new();
 //! let mut schedule = Schedule::default();
-//! SurfcachePlugin.build(&mut world, &mut schedule);
-//! spawn_scene(&mut world, &scenes::cornell());
-//! schedule.run(&mut world);
-//! let traced = world.resource::<TracedSceneResource>();
-//! assert_eq!(traced.scene().unwrap().triangle_count(), 38);
+//! // A quick, coarse bake for the example.
+//! let mut config = BakeConfig::default();
+//! config.settings.estimator.max_rel_error = 0.2;
+//! config.settings.cache.set_density(4.0);
+//! config.settings.gather_passes = 0;
+//! SurfcachePlugin::with_config(config).build(&mut world, &mut schedule);
+//! let entities = spawn_scene(&mut world, &scenes::cornell());
+//! // A game runs `SurfcachePlugin::update` once per frame while the bake runs in the
+//! // background; this runs frames until the first bake is published.
+//! let pause = std::time::Duration::from_millis(5);
+//! let baked = SurfcachePlugin::run_until_baked(&mut world, &mut schedule, pause, |_| true)
+//!     .unwrap();
+//! assert!(!baked.incremental);
+//! let lightmaps = world.resource::<PublishedLightmaps>();
+//! let floor = &lightmaps.by_entity[&entities[0]];
+//! assert!(floor.front.as_ref().unwrap().texels.iter().all(|e| e.is_finite()));
 //! ```
 
+pub mod baking;
+pub mod bvh;
 pub mod components;
 pub mod plugin;
-pub mod systems;
+pub mod publish;
+pub mod scene_sync;
 
+pub use baking::{BakeConfig, BakeMode, BakeStatus, Baking, SurfaceCacheResource};
+pub use bvh::TracedSceneResource;
 pub use components::{
-    EnvironmentLight, MeshGeometry, PunctualLight, SurfaceMaterial, WorldTransform,
+    EnvironmentLight, InstanceName, MeshGeometry, PunctualLight, SurfaceMaterial, WorldTransform,
 };
-pub use plugin::{SurfcachePlugin, SurfcacheSet, spawn_scene};
-pub use systems::TracedSceneResource;
+pub use plugin::{BakeWaitError, SurfcachePlugin, SurfcacheSet, spawn_scene};
+pub use publish::{BakeFinished, EntityLightmap, PublishedLightmaps};
+pub use scene_sync::SceneChanges;

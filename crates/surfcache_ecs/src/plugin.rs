@@ -1,31 +1,63 @@
-//! Registration of the systems, and spawning a plain [`Scene`] into a world.
+//! Registration of the resources and systems, and spawning a plain [`Scene`] into a world.
 
-use crate::{components::*, systems::*};
-use bevy_ecs::prelude::*;
+use crate::{baking::*, bvh::*, components::*, publish::*, scene_sync::*};
+use bevy_ecs::{
+    message::{MessageRegistry, Messages, message_update_system},
+    prelude::*,
+};
 use surfcache_core::Scene;
 
 /// Ordered stages of one surfcache update.
 #[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum SurfcacheSet {
-    /// Change detection on scene components.
+    /// Change detection on scene components; starting background BVH builds.
     SceneSync,
-    /// BVH build or refit.
+    /// Installing finished BVH builds.
     Bvh,
-    /// Deciding which cache samples are stale.
+    /// Deciding what a new scene invalidates; starting (or superseding) a bake.
     Invalidate,
-    /// Estimating samples within the frame budget.
+    /// Advancing the bake and its progress.
     Bake,
-    /// Publishing irradiance textures as resources.
+    /// Publishing finished irradiance textures as resources.
     Publish,
 }
 
-/// Registers surfcache's resources and systems.
-pub struct SurfcachePlugin;
+/// Registers surfcache's resources, its [`BakeFinished`] message and its systems.
+///
+/// With a plain `bevy_ecs` [`Schedule`] (no `bevy_app`), run frames with
+/// [`SurfcachePlugin::update`], which also advances messages and clears removal
+/// trackers as an app would.
+#[derive(Clone, Debug, Default)]
+pub struct SurfcachePlugin {
+    /// Bake settings; `None` keeps a [`BakeConfig`] already in the world, or the default.
+    pub config: Option<BakeConfig>,
+}
 
 impl SurfcachePlugin {
+    /// A plugin with these bake settings.
+    pub fn with_config(config: BakeConfig) -> Self {
+        Self {
+            config: Some(config),
+        }
+    }
+
     /// Adds the resources to `world` and the systems to `schedule`, in [`SurfcacheSet`] order.
     pub fn build(&self, world: &mut World, schedule: &mut Schedule) {
+        match &self.config {
+            Some(c) => world.insert_resource(c.clone()),
+            None => {
+                world.init_resource::<BakeConfig>();
+            }
+        }
+        world.init_resource::<SceneChanges>();
+        world.init_resource::<BvhBuilds>();
         world.init_resource::<TracedSceneResource>();
+        world.init_resource::<Baking>();
+        world.init_resource::<BakeStatus>();
+        world.init_resource::<FinishedBake>();
+        world.init_resource::<SurfaceCacheResource>();
+        world.init_resource::<PublishedLightmaps>();
+        MessageRegistry::register_message::<BakeFinished>(world);
         schedule.configure_sets(
             (
                 SurfcacheSet::SceneSync,
@@ -37,11 +69,75 @@ impl SurfcachePlugin {
                 .chain(),
         );
         schedule.add_systems((
-            detect_scene_changes.in_set(SurfcacheSet::SceneSync),
-            build_traced_scene.in_set(SurfcacheSet::Bvh),
+            message_update_system.before(SurfcacheSet::SceneSync),
+            (detect_scene_changes, start_bvh_build)
+                .chain()
+                .in_set(SurfcacheSet::SceneSync),
+            finish_bvh_build.in_set(SurfcacheSet::Bvh),
+            start_bake.in_set(SurfcacheSet::Invalidate),
+            step_bake.in_set(SurfcacheSet::Bake),
+            publish.in_set(SurfcacheSet::Publish),
         ));
     }
+
+    /// Runs one frame: the schedule, then clears change trackers (as `bevy_app` does).
+    pub fn update(world: &mut World, schedule: &mut Schedule) {
+        schedule.run(world);
+        world.clear_trackers();
+    }
+
+    /// Runs frames, `pause` apart (a game's frame loop), until a bake is published, and
+    /// returns its [`BakeFinished`]. After each frame `on_frame` sees the world; returning
+    /// false cancels the bake in flight and stops with [`BakeWaitError::Stopped`].
+    pub fn run_until_baked(
+        world: &mut World,
+        schedule: &mut Schedule,
+        pause: std::time::Duration,
+        mut on_frame: impl FnMut(&World) -> bool,
+    ) -> Result<BakeFinished, BakeWaitError> {
+        loop {
+            Self::update(world, schedule);
+            if let Some(done) = world
+                .resource::<Messages<BakeFinished>>()
+                .iter_current_update_messages()
+                .last()
+            {
+                return Ok(done.clone());
+            }
+            if let Some(e) = &world.resource::<BakeStatus>().error {
+                return Err(BakeWaitError::Failed(e.clone()));
+            }
+            if let Some(e) = &world.resource::<TracedSceneResource>().error {
+                return Err(BakeWaitError::Failed(e.clone()));
+            }
+            if !on_frame(world) {
+                world.resource_mut::<Baking>().cancel();
+                return Err(BakeWaitError::Stopped);
+            }
+            std::thread::sleep(pause);
+        }
+    }
 }
+
+/// Why [`SurfcachePlugin::run_until_baked`] returned without a bake.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BakeWaitError {
+    /// The scene could not be built or baked.
+    Failed(String),
+    /// `on_frame` asked to stop.
+    Stopped,
+}
+
+impl std::fmt::Display for BakeWaitError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Failed(e) => f.write_str(e),
+            Self::Stopped => f.write_str("stopped before the bake finished"),
+        }
+    }
+}
+
+impl std::error::Error for BakeWaitError {}
 
 /// Spawns every instance, light and the environment of `scene` as entities; returns the
 /// instance entities in scene order.

@@ -329,13 +329,24 @@ pub const CHANGE_MIN_SAMPLES: u32 = QMC_REPLICATES;
 /// The share of the error bound a change estimate may add to its prior's error.
 pub const CHANGE_ERROR_SHARE: f32 = 0.5;
 
+/// Sample pairs of the probe that decides between estimating a change and estimating
+/// E afresh ([`estimate_change`]).
+pub const CHANGE_PROBE_SAMPLES: u32 = 4 * QMC_REPLICATES;
+
+/// [`estimate_change`] estimates E afresh when the probe projects more than this many
+/// times the estimator's `min_samples` pairs for the change (each pair traces two paths).
+pub const CHANGE_FALLBACK_FACTOR: f32 = 2.0;
+
 /// E at a point of an edited scene from its value `prior` before the edit plus the
 /// change, estimated by *correlated sampling*: every sample traces the same directions
 /// and random numbers in both scenes, X = X_new − X_old, so wherever the edit does not
 /// touch a path the difference is exactly zero and the estimate stops after
 /// [`CHANGE_MIN_SAMPLES`] pairs; it stops when its standard error is at most
 /// [`CHANGE_ERROR_SHARE`] × bound × (E + ε). Unbiased: E = E_old + E[X_new − X_old].
-/// The punctual lights' exact parts enter as their difference too.
+/// The punctual lights' exact parts enter as their difference too. When a probe of
+/// [`CHANGE_PROBE_SAMPLES`] pairs projects the change to need more than
+/// [`CHANGE_FALLBACK_FACTOR`] × `min_samples` pairs, E is estimated afresh instead
+/// ([`estimate`] in the edited scene, with its gathering lookup).
 ///
 /// With `focus`, only directions in that cone can differ (the edit lies inside it, and
 /// both scenes' gathering lookups agree elsewhere): the change is integrated over the
@@ -368,24 +379,51 @@ pub fn estimate_change(
     let punctual_old =
         old.scene
             .punctual_irradiance_from(&old.point, old.origin, &mut punctual_rays);
-    let mut e = sample_adaptively(
-        settings,
-        seed,
-        key,
-        prior + punctual_new - punctual_old,
-        settings.max_rel_error * CHANGE_ERROR_SHARE,
-        CHANGE_MIN_SAMPLES,
-        |root, rng| {
-            let mut twin = rng.clone();
-            let (x_new, path_new) = hemisphere_sample(new, settings, root, rng, focus);
-            let (x_old, path_old) = hemisphere_sample(old, settings, root, &mut twin, focus);
-            (
-                x_new - x_old,
-                path_new.first_hit,
-                path_new.rays + path_old.rays,
+    let bound = settings.max_rel_error * CHANGE_ERROR_SHARE;
+    let change = |max_samples: u32| {
+        let settings = EstimatorSettings {
+            max_samples,
+            ..*settings
+        };
+        sample_adaptively(
+            &settings,
+            seed,
+            key,
+            prior + punctual_new - punctual_old,
+            bound,
+            CHANGE_MIN_SAMPLES,
+            |root, rng| {
+                let mut twin = rng.clone();
+                let (x_new, path_new) = hemisphere_sample(new, &settings, root, rng, focus);
+                let (x_old, path_old) = hemisphere_sample(old, &settings, root, &mut twin, focus);
+                (
+                    x_new - x_old,
+                    path_new.first_hit,
+                    path_new.rays + path_old.rays,
+                )
+            },
+        )
+    };
+    // A probe tells whether the change is cheaper to estimate than E itself: where the
+    // edit changes a large part of a dark point's light (a shadow moved onto it), the
+    // change has the variance of the old, bright E but must reach the precision of the
+    // new, dim one; a fresh estimate of E is then cheaper.
+    let probe_samples = CHANGE_PROBE_SAMPLES.min(settings.max_samples);
+    let probe = change(probe_samples);
+    let mut e = if probe.samples < probe_samples || probe.rel_error <= bound {
+        probe
+    } else {
+        let projected = probe.samples as f32 * (probe.rel_error / bound).powi(2);
+        let mut e = if projected > CHANGE_FALLBACK_FACTOR * settings.min_samples as f32 {
+            estimate(
+                new.scene, &new.point, new.origin, settings, seed, key, new.gather,
             )
-        },
-    );
+        } else {
+            change(settings.max_samples)
+        };
+        e.rays += probe.rays;
+        e
+    };
     e.rays += punctual_rays as u64;
     e
 }

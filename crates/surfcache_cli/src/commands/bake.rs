@@ -3,7 +3,7 @@
 
 use crate::{
     bake_dir::{self, StagingDir},
-    scene_args::{EnvArgs, LoadedWorld, with_threads},
+    scene_args::{EnvArgs, LoadedWorld},
 };
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -19,7 +19,11 @@ use std::{
 use surfcache_cache::{
     CacheSettings, Method, SurfaceCache,
     archive::BakeArchive,
-    bake::{BakeJob, BakeSettings, DEFAULT_GATHER_PASSES, FLOOR_FRACTION},
+    bake::{BakeSettings, DEFAULT_GATHER_PASSES, FLOOR_FRACTION},
+};
+use surfcache_ecs::{
+    BakeConfig, BakeStatus, BakeWaitError, PublishedLightmaps, SurfaceCacheResource,
+    SurfcachePlugin,
 };
 use surfcache_trace::{EstimatorSettings, Sampler};
 
@@ -124,8 +128,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
     }
     let staging = StagingDir::create(&args.out)?;
 
-    let loaded = LoadedWorld::load(&args.scene, &args.env)?;
-    let scene = loaded.traced()?;
+    let mut loaded = LoadedWorld::load(&args.scene, &args.env)?;
     let cancel = Arc::new(AtomicBool::new(false));
     {
         let cancel = cancel.clone();
@@ -134,6 +137,9 @@ pub fn run(args: BakeArgs) -> Result<()> {
         let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::SeqCst));
     }
     let threads = args.threads;
+    if threads == Some(0) {
+        bail!("--threads must be at least 1");
+    }
     if args.gather > 4 {
         bail!("--gather takes at most 4 pre-passes");
     }
@@ -150,54 +156,74 @@ pub fn run(args: BakeArgs) -> Result<()> {
         seed: args.seed,
         gather_passes: args.gather,
     };
+    // The bake is the ECS plugin's: turn baking on and run frames until it published.
     let start = Instant::now();
-    let (cache, progress, settings) = with_threads(threads, || -> Result<_> {
-        let mut job = BakeJob::new(settings);
-        let bar = ProgressBar::new_spinner().with_style(
-            ProgressStyle::with_template("bake {spinner} {msg} [{elapsed_precise}]")
-                .expect("static template"),
-        );
-        while !job.step(&scene, 1024) {
-            if cancel.load(Ordering::SeqCst) {
-                bar.finish_and_clear();
-                bail!(
-                    "interrupted: nothing was written to '{}'",
-                    args.out.display()
-                );
-            }
-            let p = job.progress();
-            let secs = start.elapsed().as_secs_f64().max(1e-9);
+    loaded.world.insert_resource(BakeConfig {
+        settings,
+        enabled: true,
+        threads,
+        points_per_step: 1024,
+        ..Default::default()
+    });
+    let bar = ProgressBar::new(1000).with_style(
+        ProgressStyle::with_template("bake [{elapsed_precise}] {bar:30} {msg}")
+            .expect("static template"),
+    );
+    SurfcachePlugin::run_until_baked(
+        &mut loaded.world,
+        &mut loaded.schedule,
+        std::time::Duration::from_millis(20),
+        |world| {
+            let status = world.resource::<BakeStatus>();
+            bar.set_position((status.fraction * 1000.0) as u64);
             bar.set_message(format!(
-                "pass {}/{} round {}: {} points done, {} pending, {:.1} Mrays/s",
-                p.pass + 1,
-                p.passes,
-                p.current.rounds + 1,
-                p.current.points_done,
-                p.current.points_pending,
-                p.rays as f64 / secs / 1e6
+                "{} samples, {:.1} Mrays/s{}",
+                status.samples,
+                status.rays_per_second / 1e6,
+                status
+                    .eta_seconds
+                    .map(|s| format!(", about {s:.0} s left"))
+                    .unwrap_or_default()
             ));
-            bar.tick();
-        }
+            !cancel.load(Ordering::SeqCst)
+        },
+    )
+    .map_err(|e| {
         bar.finish_and_clear();
-        let mut outcome = job
-            .into_outcome()
-            .context("internal error: the bake did not finish")?;
-        let cache = outcome
-            .passes
-            .pop()
-            .context("internal error: no final pass")?;
-        let cache = Arc::try_unwrap(cache).unwrap_or_else(|shared| (*shared).clone());
-        Ok((cache, outcome.progress, outcome.settings))
-    })??;
+        match e {
+            BakeWaitError::Stopped => anyhow::anyhow!(
+                "interrupted: nothing was written to '{}'",
+                args.out.display()
+            ),
+            BakeWaitError::Failed(e) => anyhow::anyhow!("bake failed: {e}"),
+        }
+    })?;
+    bar.finish_and_clear();
+    let baked = loaded.world.resource::<SurfaceCacheResource>().clone();
+    let (Some(outcome), Some(scene)) = (baked.outcome, baked.scene) else {
+        bail!("internal error: the bake did not finish");
+    };
+    let progress = outcome.progress;
+    let settings = outcome.settings;
+    let cache = outcome.cache().clone();
+    // The textures the plugin published, in instance order, front before back.
+    let mut textures: Vec<_> = loaded
+        .world
+        .resource::<PublishedLightmaps>()
+        .by_entity
+        .values()
+        .flat_map(|l| l.front.iter().chain(l.back.iter()))
+        .map(|t| (**t).clone())
+        .collect();
+    textures.sort_by_key(|t| (t.instance, !t.front));
     let floor = settings.estimator.floor;
     let mean = floor / FLOOR_FRACTION;
     let bake_seconds = start.elapsed().as_secs_f64();
     let stats = cache.stats();
 
     // Outputs: archive for `query`, textures, the scene with UV1, the report.
-    let textures = cache.publish(&scene);
     let lightmaps = bake_dir::write_lightmaps(&staging, &loaded, &scene, &textures)?;
-    let archive = BakeArchive::new(&scene, cache);
+    let archive = BakeArchive::new(&scene, Arc::unwrap_or_clone(cache));
     staging.write("cache.bin", &archive.to_bytes())?;
     let report = json!({
         "scene": loaded.name,
@@ -230,7 +256,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
             "max_samples": max_samples,
             "bounces": args.bounces,
             "seed": args.seed,
-            "threads": threads.unwrap_or_else(rayon::current_num_threads),
+            "threads": threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
             "sampler": sampler.name(),
             "sides": args.sides,
             "gather": args.gather,

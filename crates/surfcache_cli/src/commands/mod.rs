@@ -1,13 +1,13 @@
 //! One module per subcommand.
 
 mod bake;
-mod compare;
+pub(crate) mod compare;
 mod export;
 mod points;
 mod query;
 mod rays;
 mod reference;
-mod render;
+pub(crate) mod render;
 mod trace;
 
 use anyhow::Result;

@@ -14,7 +14,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::path::PathBuf;
 use surfcache_cache::SurfaceCache;
-use surfcache_trace::{EstimatorSettings, Sampler, estimate};
+use surfcache_trace::{EstimatorSettings, Hit, Sampler, TracedScene, estimate};
 
 #[derive(clap::Args)]
 pub struct RenderArgs {
@@ -97,7 +97,6 @@ pub fn run(args: RenderArgs) -> Result<()> {
         args.fov,
         default_view(lo, hi, args.fov),
     )?;
-    let aspect = width as f32 / height as f32;
     let reference = args
         .reference
         .map(|n| EstimatorSettings::fixed(Sampler::Best, n, None));
@@ -106,59 +105,39 @@ pub fn run(args: RenderArgs) -> Result<()> {
         ProgressStyle::with_template("render {bar:40} {pos}/{len} rows, eta {eta}")
             .expect("static template"),
     );
-    let pixels: Vec<Vec3> = with_threads(args.threads, || {
-        (0..height)
-            .into_par_iter()
-            .flat_map_iter(|y| {
-                let row: Vec<Vec3> = (0..width)
-                    .map(|x| {
-                        let mut sum = Vec3::ZERO;
-                        for s in 0..SUBPIXELS * SUBPIXELS {
-                            let sub = Vec2::new((s % SUBPIXELS) as f32, (s / SUBPIXELS) as f32);
-                            let px = Vec2::new(x as f32, y as f32) + (sub + 0.5) / SUBPIXELS as f32;
-                            let ndc = px / Vec2::new(width as f32, height as f32) * 2.0 - 1.0;
-                            let d = camera.direction(ndc, aspect);
-                            let Some(hit) = scene.closest_hit(camera.eye, d, f32::INFINITY) else {
-                                if show.is_none() {
-                                    sum += scene.environment.radiance(d);
-                                }
-                                continue;
-                            };
-                            let p = scene.hit_point(&hit, d);
-                            let front = scene.geometric_normals[hit.triangle as usize].dot(d) < 0.0;
-                            if let (Some(kind), Some(a)) = (show, &archive) {
-                                let diag = a.cache.diagnostic(hit.triangle, hit.uv, front);
-                                sum += match kind {
-                                    "order" => match diag.order {
-                                        Some(o) => heat((o.max(1) as f32).log2() / 7.0),
-                                        None => Vec3::splat(0.2),
-                                    },
-                                    _ => heat((diag.samples.max(1) as f32).log2() / 18.0),
-                                };
-                                continue;
-                            }
-                            let material = scene.material_of(hit.triangle);
-                            let uv0 = scene.uv0_at(hit.triangle, hit.uv);
-                            let e = match (&archive, &reference) {
-                                (Some(a), _) => a.cache.lookup(hit.triangle, hit.uv, front),
-                                (None, Some(settings)) => {
-                                    let origin = scene.spawn_origin(&p);
-                                    let key = ((y * width + x) * SUBPIXELS * SUBPIXELS + s) as u64;
-                                    estimate(&scene, &p, origin, settings, args.seed, key, None)
-                                        .value
-                                }
-                                (None, None) => Vec3::ZERO,
-                            };
-                            sum += material.emission_at(uv0, front)
-                                + material.albedo_at(uv0) * core::f32::consts::FRAC_1_PI * e;
-                        }
-                        sum / (SUBPIXELS * SUBPIXELS) as f32
-                    })
-                    .collect();
-                bar.inc(1);
-                row
-            })
-            .collect()
+    let shade = |hit: &Hit, d: Vec3, key: u64| -> Vec3 {
+        let front = scene.geometric_normals[hit.triangle as usize].dot(d) < 0.0;
+        if let (Some(kind), Some(a)) = (show, &archive) {
+            let diag = a.cache.diagnostic(hit.triangle, hit.uv, front);
+            return match kind {
+                "order" => match diag.order {
+                    Some(o) => heat((o.max(1) as f32).log2() / 7.0),
+                    None => Vec3::splat(0.2),
+                },
+                _ => heat((diag.samples.max(1) as f32).log2() / 18.0),
+            };
+        }
+        let e = match (&archive, &reference) {
+            (Some(a), _) => a.cache.lookup(hit.triangle, hit.uv, front),
+            (None, Some(settings)) => {
+                let p = scene.hit_point(hit, d);
+                let origin = scene.spawn_origin(&p);
+                estimate(&scene, &p, origin, settings, args.seed, key, None).value
+            }
+            (None, None) => Vec3::ZERO,
+        };
+        surface_radiance(&scene, hit, d, e)
+    };
+    let pixels = with_threads(args.threads, || {
+        render_view(
+            &scene,
+            &camera,
+            width,
+            height,
+            show.is_none(),
+            &shade,
+            || bar.inc(1),
+        )
     })?;
     bar.finish_and_clear();
     let exposure = match (args.exposure, show) {
@@ -183,4 +162,56 @@ fn parse_size(s: &str) -> Result<(u32, u32)> {
         Some((w, h)) if (1..=16384).contains(&w) && (1..=16384).contains(&h) => Ok((w, h)),
         _ => bail!("--size must be WxH with each side between 1 and 16384, got '{s}'"),
     }
+}
+
+/// Radiance leaving a primary hit towards the camera (direction `d` from it):
+/// L = L_e + ρ/π · E, with E the irradiance on the side facing the camera.
+pub fn surface_radiance(scene: &TracedScene, hit: &Hit, d: Vec3, e: Vec3) -> Vec3 {
+    let front = scene.geometric_normals[hit.triangle as usize].dot(d) < 0.0;
+    let material = scene.material_of(hit.triangle);
+    let uv0 = scene.uv0_at(hit.triangle, hit.uv);
+    material.emission_at(uv0, front) + material.albedo_at(uv0) * core::f32::consts::FRAC_1_PI * e
+}
+
+/// Renders `camera`'s view of `scene` (row 0 at the top), 2×2 fixed sub-pixel samples:
+/// `shade(hit, direction, key)` gives the radiance seen at each primary hit (`key` is
+/// unique per sub-pixel sample), and missed rays see the environment when `background`.
+/// Calls `row_done` after each row.
+pub fn render_view(
+    scene: &TracedScene,
+    camera: &Camera,
+    width: u32,
+    height: u32,
+    background: bool,
+    shade: &(dyn Fn(&Hit, Vec3, u64) -> Vec3 + Sync),
+    row_done: impl Fn() + Sync,
+) -> Vec<Vec3> {
+    let aspect = width as f32 / height as f32;
+    (0..height)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            let row: Vec<Vec3> = (0..width)
+                .map(|x| {
+                    let mut sum = Vec3::ZERO;
+                    for s in 0..SUBPIXELS * SUBPIXELS {
+                        let sub = Vec2::new((s % SUBPIXELS) as f32, (s / SUBPIXELS) as f32);
+                        let px = Vec2::new(x as f32, y as f32) + (sub + 0.5) / SUBPIXELS as f32;
+                        let ndc = px / Vec2::new(width as f32, height as f32) * 2.0 - 1.0;
+                        let d = camera.direction(ndc, aspect);
+                        match scene.closest_hit(camera.eye, d, f32::INFINITY) {
+                            Some(hit) => {
+                                let key = ((y * width + x) * SUBPIXELS * SUBPIXELS + s) as u64;
+                                sum += shade(&hit, d, key);
+                            }
+                            None if background => sum += scene.environment.radiance(d),
+                            None => {}
+                        }
+                    }
+                    sum / (SUBPIXELS * SUBPIXELS) as f32
+                })
+                .collect();
+            row_done();
+            row
+        })
+        .collect()
 }

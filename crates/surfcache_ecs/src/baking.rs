@@ -1,0 +1,586 @@
+//! Bakes and re-bakes of the surface cache, off the frame.
+//!
+//! **Invalidation policy** ([`start_bake`], DESIGN.md §6). Each new traced scene starts a
+//! bake, and supersedes (cancels) one in flight. It re-bakes *incrementally* from the
+//! last finished bake (the *baseline*) when
+//! - a baseline exists and was baked with the same [`BakeSettings`],
+//! - neither lights nor the environment changed since (they light every surface),
+//! - and the changed instances (added, removed, moved, re-meshed or re-coloured since the
+//!   baseline, over every superseded snapshot too) hold at most
+//!   [`BakeConfig::full_rebake_share`] of the triangles before and after the edit.
+//!
+//! Otherwise it bakes from scratch. An incremental re-bake
+//! ([`surfcache_cache::incremental::IncrementalJob`]) keeps every sample of unchanged
+//! triangles as a prior, and re-estimates the *change* of each sample in two stages: the
+//! direct change through the directions towards the box around the changed instances'
+//! old and new surfaces (exactly zero, without tracing, where that box lies below a
+//! sample's horizon), then the indirect change from surfaces whose irradiance changed.
+//! Left out, as its docs bound: changes that reach a sample over three or more bounces
+//! off the edited region.
+//!
+//! **Never blocking a frame.** In [`BakeMode::Background`] (the default) the BVH build
+//! and the bake run on background threads (the bake on a rayon pool of
+//! [`BakeConfig::threads`]); the systems only start work, poll channels and swap finished
+//! results in, in time independent of the scene's size except for the O(instances)
+//! snapshot. [`BakeMode::Foreground`] instead estimates points on the calling thread for
+//! at most a time budget per update (for platforms without threads, and to show that
+//! results do not depend on pacing).
+//!
+//! **Determinism.** Every sample's random stream is keyed by its position and the seed,
+//! never by frame or step, so a bake's result depends only on the scene, the settings and
+//! the baseline it started from — not on frame pacing, step sizes, budgets or threads.
+//! A superseded bake never publishes: results carry the generation of the scene snapshot
+//! they were baked from, and only the newest is accepted.
+
+use crate::{bvh::TracedSceneResource, publish::PublishedLightmaps, scene_sync::SceneChanges};
+use bevy_ecs::prelude::*;
+use glam::Vec3;
+use std::{
+    collections::{BTreeSet, HashMap},
+    sync::{
+        Arc, Mutex,
+        atomic::{AtomicBool, Ordering},
+        mpsc::{Receiver, TryRecvError, channel},
+    },
+    time::{Duration, Instant},
+};
+use surfcache_cache::{
+    Cache, SurfaceCache,
+    bake::{BakeJob, BakeOutcome, BakeSettings, JobProgress},
+    incremental::{Edit, IncrementalJob},
+    triangle_map,
+};
+use surfcache_trace::TracedScene;
+
+/// Where bake work runs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BakeMode {
+    /// On a background thread and rayon pool; systems never wait for it.
+    Background,
+    /// On the thread running the schedule, for about `budget` per update.
+    Foreground { budget: Duration },
+}
+
+/// How and when the world's surface cache is baked.
+#[derive(Resource, Clone, Debug)]
+pub struct BakeConfig {
+    /// Method, sampler, error bound, sample limits, gathering, seed.
+    pub settings: BakeSettings,
+    /// Bake whenever the traced scene changes (off: only the BVH is kept current).
+    pub enabled: bool,
+    pub mode: BakeMode,
+    /// Worker threads of background bakes (`None`: all cores).
+    pub threads: Option<usize>,
+    /// Points estimated between checks for cancellation and progress updates.
+    pub points_per_step: usize,
+    /// Re-bake from scratch when the changed instances hold more than this share of the
+    /// triangles.
+    pub full_rebake_share: f32,
+}
+
+impl Default for BakeConfig {
+    fn default() -> Self {
+        Self {
+            settings: BakeSettings::default(),
+            enabled: true,
+            mode: BakeMode::Background,
+            threads: None,
+            points_per_step: 256,
+            full_rebake_share: 0.5,
+        }
+    }
+}
+
+/// Progress of the bake in flight, and the outcome of the last one.
+#[derive(Resource, Clone, Debug, Default, PartialEq)]
+pub struct BakeStatus {
+    /// A bake is in flight.
+    pub running: bool,
+    /// Scene generation of the bake in flight (or of the last one).
+    pub generation: u64,
+    /// Whether it is an incremental re-bake.
+    pub incremental: bool,
+    /// Estimated share done, 0–1.
+    pub fraction: f32,
+    pub samples: u64,
+    pub rays: u64,
+    pub rays_per_second: f64,
+    /// Estimated seconds left.
+    pub eta_seconds: Option<f64>,
+    /// Wall-clock seconds so far (or of the finished bake).
+    pub seconds: f64,
+    /// Why the last bake failed, if it did.
+    pub error: Option<String>,
+}
+
+/// The finished surface cache of the newest baked scene.
+#[derive(Resource, Default, Clone)]
+pub struct SurfaceCacheResource {
+    /// The bake (every pass; the final cache is [`BakeOutcome::cache`]).
+    pub outcome: Option<BakeOutcome>,
+    /// The traced scene it was baked over, and the entity of each of its instances.
+    pub scene: Option<Arc<TracedScene>>,
+    pub entities: Vec<Entity>,
+    /// Its scene generation.
+    pub generation: u64,
+}
+
+impl SurfaceCacheResource {
+    /// The final cache, if a bake finished.
+    pub fn cache(&self) -> Option<&Arc<Cache>> {
+        self.outcome.as_ref().map(|o| o.cache())
+    }
+}
+
+/// A bake job of either kind.
+enum Job {
+    Full(Box<BakeJob>),
+    Incremental(Box<IncrementalJob>),
+}
+
+impl Job {
+    fn step(&mut self, scene: &Arc<TracedScene>, points: usize) -> bool {
+        match self {
+            Job::Full(j) => j.step(scene, points),
+            Job::Incremental(j) => j.step(scene, points),
+        }
+    }
+
+    fn progress(&self) -> JobProgress {
+        match self {
+            Job::Full(j) => j.progress(),
+            Job::Incremental(j) => j.progress(),
+        }
+    }
+
+    fn into_outcome(self) -> Option<BakeOutcome> {
+        match self {
+            Job::Full(j) => j.into_outcome(),
+            Job::Incremental(j) => j.into_outcome(),
+        }
+    }
+}
+
+/// The last finished bake, the start of incremental re-bakes.
+#[derive(Clone)]
+struct Baseline {
+    scene: Arc<TracedScene>,
+    entities: Vec<Entity>,
+    outcome: BakeOutcome,
+    published: Arc<PublishedLightmaps>,
+}
+
+/// A finished bake, ready to publish.
+pub(crate) struct Finished {
+    pub generation: u64,
+    pub incremental: bool,
+    pub seconds: f64,
+    pub scene: Arc<TracedScene>,
+    pub entities: Vec<Entity>,
+    pub outcome: BakeOutcome,
+    pub published: Arc<PublishedLightmaps>,
+}
+
+/// One bake: the job, its scene and what it needs to publish.
+struct Run {
+    job: Job,
+    scene: Arc<TracedScene>,
+    entities: Vec<Entity>,
+    generation: u64,
+    incremental: bool,
+    previous: Option<Arc<PublishedLightmaps>>,
+    started: Instant,
+}
+
+impl Run {
+    fn finish(self) -> Result<Finished, String> {
+        let seconds = self.started.elapsed().as_secs_f64();
+        let outcome = self
+            .job
+            .into_outcome()
+            .ok_or("internal error: the bake did not finish")?;
+        let textures = outcome.cache().publish(&self.scene);
+        let published = PublishedLightmaps::from_textures(
+            textures,
+            &self.entities,
+            self.generation,
+            self.previous.as_deref(),
+        );
+        Ok(Finished {
+            generation: self.generation,
+            incremental: self.incremental,
+            seconds,
+            scene: self.scene,
+            entities: self.entities,
+            outcome,
+            published: Arc::new(published),
+        })
+    }
+
+    fn status(&self, progress: &JobProgress) -> BakeStatus {
+        let seconds = self.started.elapsed().as_secs_f64();
+        let passes = progress.passes.max(1) as f32;
+        let current = &progress.current;
+        let total = (current.points_done + current.points_pending).max(1) as f32;
+        let fraction = if progress.finished {
+            1.0
+        } else {
+            ((progress.pass as f32 + current.points_done as f32 / total) / passes).clamp(0.0, 1.0)
+        };
+        BakeStatus {
+            running: !progress.finished,
+            generation: self.generation,
+            incremental: self.incremental,
+            fraction,
+            samples: progress.samples,
+            rays: progress.rays,
+            rays_per_second: progress.rays as f64 / seconds.max(1e-9),
+            eta_seconds: (fraction > 0.0)
+                .then(|| seconds * (1.0 - fraction as f64) / fraction as f64),
+            seconds,
+            error: None,
+        }
+    }
+}
+
+/// The background side of a bake in flight.
+struct Worker {
+    generation: u64,
+    cancel: Arc<AtomicBool>,
+    status: Arc<Mutex<BakeStatus>>,
+    /// (A `Mutex` only to make the resource `Sync`; one system reads it.)
+    result: Mutex<Receiver<Result<Finished, String>>>,
+}
+
+/// Bake bookkeeping: the baseline, changes since it, and the bake in flight.
+#[derive(Resource, Default)]
+pub struct Baking {
+    baseline: Option<Baseline>,
+    /// Instances changed since the baseline (over superseded snapshots too).
+    changed: BTreeSet<Entity>,
+    global: bool,
+    /// The newest traced-scene generation a bake was started for.
+    started: u64,
+    worker: Option<Worker>,
+    /// (A `Mutex` only to make the resource `Sync`; one system steps it.)
+    foreground: Option<Mutex<Run>>,
+    pool: Option<(Option<usize>, Arc<rayon::ThreadPool>)>,
+}
+
+impl Baking {
+    /// Cancels the bake in flight; it will not publish.
+    pub fn cancel(&mut self) {
+        if let Some(w) = self.worker.take() {
+            w.cancel.store(true, Ordering::SeqCst);
+        }
+        self.foreground = None;
+    }
+
+    /// Whether a bake is in flight.
+    pub fn busy(&self) -> bool {
+        self.worker.is_some() || self.foreground.is_some()
+    }
+
+    fn pool(&mut self, threads: Option<usize>) -> Result<Arc<rayon::ThreadPool>, String> {
+        if let Some((n, pool)) = &self.pool
+            && *n == threads
+        {
+            return Ok(pool.clone());
+        }
+        let mut builder =
+            rayon::ThreadPoolBuilder::new().thread_name(|i| format!("surfcache-bake-{i}"));
+        if let Some(n) = threads {
+            builder = builder.num_threads(n);
+        }
+        let pool = Arc::new(
+            builder
+                .build()
+                .map_err(|e| format!("cannot start the bake threads: {e}"))?,
+        );
+        self.pool = Some((threads, pool.clone()));
+        Ok(pool)
+    }
+}
+
+/// The box around the changed instances' triangles in the old and the new scene.
+fn changed_region(
+    old: &TracedScene,
+    old_entities: &[Entity],
+    new: &TracedScene,
+    new_entities: &[Entity],
+    changed: &BTreeSet<Entity>,
+) -> (Option<(Vec3, Vec3)>, usize) {
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    let mut triangles = 0;
+    for (scene, entities) in [(old, old_entities), (new, new_entities)] {
+        for (k, e) in entities.iter().enumerate() {
+            if !changed.contains(e) {
+                continue;
+            }
+            for t in scene.instance_triangles[k].clone() {
+                triangles += 1;
+                for p in scene.positions[t as usize] {
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+            }
+        }
+    }
+    ((triangles > 0).then_some((lo, hi)), triangles)
+}
+
+/// What a new traced scene needs.
+enum Plan {
+    Bake(Job, bool),
+    /// No surface changed since the baseline (e.g. a component was written with its old
+    /// value): the baseline holds for the new scene as it is.
+    Unchanged,
+}
+
+/// Chooses the job for a new traced scene (module docs: the invalidation policy).
+fn plan(
+    config: &BakeConfig,
+    baking: &Baking,
+    scene: &Arc<TracedScene>,
+    entities: &[Entity],
+) -> Plan {
+    let full = || Plan::Bake(Job::Full(Box::new(BakeJob::new(config.settings))), false);
+    let Some(base) = &baking.baseline else {
+        return full();
+    };
+    let mut same_settings = base.outcome.settings;
+    // The baseline's floor was measured on its scene; the rest must match.
+    same_settings.estimator.floor = config.settings.estimator.floor;
+    same_settings
+        .cache
+        .set_floor(config.settings.estimator.floor);
+    let mut requested = config.settings;
+    requested.cache.set_floor(config.settings.estimator.floor);
+    if baking.global || same_settings != requested {
+        return full();
+    }
+    let (region, changed_triangles) = changed_region(
+        &base.scene,
+        &base.entities,
+        scene,
+        entities,
+        &baking.changed,
+    );
+    let total = base.scene.triangle_count() + scene.triangle_count();
+    let Some(region) = region else {
+        return Plan::Unchanged;
+    };
+    if changed_triangles as f32 > config.full_rebake_share * total as f32 {
+        return full();
+    }
+    let index: HashMap<Entity, u32> = base
+        .entities
+        .iter()
+        .enumerate()
+        .map(|(k, e)| (*e, k as u32))
+        .collect();
+    let instance_map: Vec<Option<u32>> = entities.iter().map(|e| index.get(e).copied()).collect();
+    let map = Arc::new(triangle_map(&base.scene, scene, &instance_map));
+    let job = IncrementalJob::new(
+        base.outcome.clone(),
+        base.scene.clone(),
+        Edit {
+            triangle_map: map,
+            region,
+        },
+    );
+    Plan::Bake(Job::Incremental(Box::new(job)), true)
+}
+
+/// Invalidation: when a new traced scene is installed, records what changed since the
+/// baseline, cancels a bake in flight and starts the one the policy chooses.
+pub fn start_bake(
+    config: Res<BakeConfig>,
+    mut baking: ResMut<Baking>,
+    mut traced: ResMut<TracedSceneResource>,
+    mut status: ResMut<BakeStatus>,
+) {
+    if traced.generation == baking.started || !config.enabled {
+        return;
+    }
+    let Some(scene) = traced.scene().cloned() else {
+        return;
+    };
+    let changes: SceneChanges = std::mem::take(&mut traced.changes);
+    baking.changed.extend(changes.instances.iter().copied());
+    baking.global |= changes.global;
+    baking.started = traced.generation;
+    baking.cancel();
+    let entities = traced.entities.clone();
+    let (job, incremental) = match plan(&config, &baking, &scene, &entities) {
+        Plan::Bake(job, incremental) => (job, incremental),
+        Plan::Unchanged => {
+            if let Some(base) = baking.baseline.as_mut() {
+                base.scene = scene;
+                base.entities = entities;
+            }
+            baking.changed.clear();
+            return;
+        }
+    };
+    let run = Run {
+        job,
+        scene,
+        entities,
+        generation: traced.generation,
+        incremental,
+        previous: baking.baseline.as_ref().map(|b| b.published.clone()),
+        started: Instant::now(),
+    };
+    *status = BakeStatus {
+        running: true,
+        generation: run.generation,
+        incremental,
+        ..Default::default()
+    };
+    match config.mode {
+        BakeMode::Foreground { .. } => baking.foreground = Some(Mutex::new(run)),
+        BakeMode::Background => {
+            let pool = match baking.pool(config.threads) {
+                Ok(p) => p,
+                Err(e) => {
+                    status.running = false;
+                    status.error = Some(e);
+                    return;
+                }
+            };
+            baking.worker = Some(spawn_worker(run, pool, config.points_per_step.max(1)));
+        }
+    }
+}
+
+fn spawn_worker(mut run: Run, pool: Arc<rayon::ThreadPool>, points: usize) -> Worker {
+    let cancel = Arc::new(AtomicBool::new(false));
+    let status = Arc::new(Mutex::new(BakeStatus {
+        running: true,
+        generation: run.generation,
+        incremental: run.incremental,
+        ..Default::default()
+    }));
+    let (tx, rx) = channel();
+    let worker = Worker {
+        generation: run.generation,
+        cancel: cancel.clone(),
+        status: status.clone(),
+        result: Mutex::new(rx),
+    };
+    std::thread::spawn(move || {
+        let result = pool.install(|| {
+            loop {
+                if cancel.load(Ordering::SeqCst) {
+                    return None;
+                }
+                let done = run.job.step(&run.scene, points);
+                if let Ok(mut s) = status.lock() {
+                    *s = run.status(&run.job.progress());
+                }
+                if done {
+                    return Some(run.finish());
+                }
+            }
+        });
+        if let Some(result) = result {
+            // The receiver is gone when the bake was superseded meanwhile.
+            let _ = tx.send(result);
+        }
+    });
+    worker
+}
+
+/// Bake step: advances a foreground bake within its budget, or copies a background
+/// bake's progress into [`BakeStatus`]; hands a finished bake to [`publish`](crate::publish::publish).
+pub fn step_bake(
+    config: Res<BakeConfig>,
+    mut baking: ResMut<Baking>,
+    mut status: ResMut<BakeStatus>,
+    mut finished: ResMut<crate::publish::FinishedBake>,
+) {
+    if let Some(w) = &baking.worker {
+        if let Ok(s) = w.status.lock()
+            && *status != *s
+        {
+            *status = s.clone();
+        }
+        let received = match w.result.lock() {
+            Ok(rx) => rx.try_recv(),
+            Err(_) => Err(TryRecvError::Disconnected),
+        };
+        match received {
+            Err(TryRecvError::Empty) => {}
+            Ok(result) => {
+                let generation = w.generation;
+                baking.worker = None;
+                accept(&mut baking, &mut status, &mut finished, generation, result);
+            }
+            Err(TryRecvError::Disconnected) => {
+                let generation = w.generation;
+                baking.worker = None;
+                accept(
+                    &mut baking,
+                    &mut status,
+                    &mut finished,
+                    generation,
+                    Err("internal error: the bake thread panicked".into()),
+                );
+            }
+        }
+        return;
+    }
+    let BakeMode::Foreground { budget } = config.mode else {
+        return;
+    };
+    let Some(run) = baking.foreground.as_mut().and_then(|r| r.get_mut().ok()) else {
+        return;
+    };
+    let start = Instant::now();
+    let points = config.points_per_step.max(1);
+    let mut done = false;
+    while !done && start.elapsed() < budget {
+        done = run.job.step(&run.scene, points);
+    }
+    *status = run.status(&run.job.progress());
+    if done && let Some(run) = baking.foreground.take().and_then(|r| r.into_inner().ok()) {
+        let generation = run.generation;
+        let result = run.finish();
+        accept(&mut baking, &mut status, &mut finished, generation, result);
+    }
+}
+
+/// Makes a finished bake of the newest scene the baseline and queues it for publishing.
+fn accept(
+    baking: &mut Baking,
+    status: &mut BakeStatus,
+    finished: &mut crate::publish::FinishedBake,
+    generation: u64,
+    result: Result<Finished, String>,
+) {
+    if generation != baking.started {
+        return;
+    }
+    match result {
+        Ok(f) => {
+            status.running = false;
+            status.fraction = 1.0;
+            status.seconds = f.seconds;
+            status.eta_seconds = Some(0.0);
+            baking.baseline = Some(Baseline {
+                scene: f.scene.clone(),
+                entities: f.entities.clone(),
+                outcome: f.outcome.clone(),
+                published: f.published.clone(),
+            });
+            baking.changed.clear();
+            baking.global = false;
+            finished.0 = Some(f);
+        }
+        Err(e) => {
+            status.running = false;
+            status.error = Some(e);
+        }
+    }
+}

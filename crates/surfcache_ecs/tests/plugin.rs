@@ -1,0 +1,344 @@
+//! The plugin end to end: background bakes, incremental re-bakes after each kind of edit
+//! (checked against from-scratch bakes of the edited scene), removal, superseded bakes,
+//! and independence from frame pacing.
+
+use bevy_ecs::prelude::*;
+use glam::{Affine3A, Vec3};
+use std::{sync::Arc, time::Duration};
+use surfcache_cache::{Cache, CacheSettings, Method, SurfaceCache, bake::BakeSettings};
+use surfcache_core::{Environment, Material, Scene, sampling::Rng, scenes};
+use surfcache_ecs::{
+    BakeConfig, BakeFinished, BakeMode, EnvironmentLight, InstanceName, PublishedLightmaps,
+    SurfaceCacheResource, SurfaceMaterial, SurfcachePlugin, TracedSceneResource, WorldTransform,
+    spawn_scene,
+};
+use surfcache_trace::{EstimatorSettings, TracedScene};
+
+const BOUND: f32 = 0.05;
+
+/// Quick settings: coarse caches, a 5 % bound, full paths (no gathering pre-passes).
+fn settings(method: Method) -> BakeSettings {
+    let mut cache = CacheSettings::for_method(method);
+    cache.set_density(match method {
+        Method::Lightmap => 12.0,
+        _ => 8.0,
+    });
+    BakeSettings {
+        cache,
+        estimator: EstimatorSettings {
+            max_rel_error: BOUND,
+            min_samples: 64,
+            max_samples: 4096,
+            floor: 0.0,
+            ..Default::default()
+        },
+        seed: 7,
+        gather_passes: 0,
+    }
+}
+
+fn world_with(scene: &Scene, config: BakeConfig) -> (World, Schedule, Vec<Entity>) {
+    let mut world = World::new();
+    let mut schedule = Schedule::default();
+    SurfcachePlugin::with_config(config).build(&mut world, &mut schedule);
+    let entities = spawn_scene(&mut world, scene);
+    (world, schedule, entities)
+}
+
+fn config(method: Method) -> BakeConfig {
+    BakeConfig {
+        settings: settings(method),
+        threads: Some(2),
+        ..Default::default()
+    }
+}
+
+fn bake(world: &mut World, schedule: &mut Schedule) -> BakeFinished {
+    SurfcachePlugin::run_until_baked(world, schedule, Duration::from_millis(1), |_| true)
+        .expect("the bake finishes")
+}
+
+fn baked(world: &World) -> (Arc<TracedScene>, Arc<Cache>) {
+    let r = world.resource::<SurfaceCacheResource>();
+    (r.scene.clone().unwrap(), r.cache().unwrap().clone())
+}
+
+/// Relative RMS of `a` against `b` at area-weighted random front-side points (the
+/// metric of `surfcache compare`, ε = 1 % of the mean).
+fn rel_rms(scene: &TracedScene, a: &dyn SurfaceCache, b: &dyn SurfaceCache) -> f64 {
+    let areas = scene.area_distribution();
+    let mut rng = Rng::new(3, 4);
+    let pairs: Vec<(Vec3, Vec3)> = (0..1500)
+        .map(|_| {
+            let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), true);
+            (
+                a.lookup(p.triangle, p.uv, true),
+                b.lookup(p.triangle, p.uv, true),
+            )
+        })
+        .filter(|(_, b)| b.max_element() > 0.0)
+        .collect();
+    let mean = pairs.iter().map(|p| p.1).sum::<Vec3>() / pairs.len() as f32;
+    let eps = 0.01 * mean;
+    let sq: f64 = pairs
+        .iter()
+        .map(|(a, b)| (((*a - *b) / (*b + eps)).length_squared()) as f64)
+        .sum();
+    (sq / (3 * pairs.len()) as f64).sqrt()
+}
+
+fn entity_named(world: &mut World, name: &str) -> Entity {
+    let mut q = world.query::<(Entity, &InstanceName)>();
+    q.iter(world)
+        .find(|(_, n)| n.0 == name)
+        .map(|(e, _)| e)
+        .unwrap_or_else(|| panic!("no instance '{name}'"))
+}
+
+/// One edit: applied to the world (as a game would) and to the plain scene (for the
+/// from-scratch bake).
+struct EditCase {
+    name: &'static str,
+    world: fn(&mut World),
+    scene: fn(&mut Scene),
+}
+
+fn move_block(world: &mut World) {
+    let e = entity_named(world, "short_block");
+    world.get_mut::<WorldTransform>(e).unwrap().0 =
+        Affine3A::from_translation(Vec3::new(0.0, 0.0, 0.1));
+}
+
+fn move_block_scene(scene: &mut Scene) {
+    for i in &mut scene.instances {
+        if i.name == "short_block" {
+            i.transform = Affine3A::from_translation(Vec3::new(0.0, 0.0, 0.1));
+        }
+    }
+}
+
+fn red_block() -> Arc<Material> {
+    Arc::new(Material::diffuse("red", Vec3::new(0.8, 0.1, 0.1)))
+}
+
+fn recolour(world: &mut World) {
+    let e = entity_named(world, "tall_block");
+    world.get_mut::<SurfaceMaterial>(e).unwrap().0 = red_block();
+}
+
+fn recolour_scene(scene: &mut Scene) {
+    for i in &mut scene.instances {
+        if i.name == "tall_block" {
+            i.material = red_block();
+        }
+    }
+}
+
+fn remove(world: &mut World) {
+    let e = entity_named(world, "short_block");
+    world.despawn(e);
+}
+
+fn remove_scene(scene: &mut Scene) {
+    scene.instances.retain(|i| i.name != "short_block");
+}
+
+/// Checks the incremental re-bake after `case` against a from-scratch bake of the
+/// edited scene, for `method`.
+fn check_edit(method: Method, case: &EditCase) {
+    let before = scenes::cornell();
+    let (mut world, mut schedule, _) = world_with(&before, config(method));
+    let first = bake(&mut world, &mut schedule);
+    assert!(!first.incremental);
+    let (_, stale) = baked(&world);
+    (case.world)(&mut world);
+    let rebake = bake(&mut world, &mut schedule);
+    assert!(rebake.incremental, "{}: re-baked incrementally", case.name);
+    assert!(rebake.generation > first.generation);
+    let (scene, incremental) = baked(&world);
+
+    let mut after = before.clone();
+    (case.scene)(&mut after);
+    let (mut w2, mut s2, _) = world_with(&after, config(method));
+    bake(&mut w2, &mut s2);
+    let (scratch_scene, scratch) = baked(&w2);
+    assert_eq!(scratch_scene.positions, scene.positions, "{}", case.name);
+    let err = rel_rms(&scene, incremental.as_ref(), scratch.as_ref());
+    eprintln!(
+        "{} / {}: incremental vs scratch rel_rms {err:.4}",
+        method.name(),
+        case.name
+    );
+    assert!(
+        err <= 2.0 * BOUND as f64,
+        "{} / {}: incremental differs from scratch by {err:.4}",
+        method.name(),
+        case.name
+    );
+    // The edit mattered (else the check above proves nothing): a stale cache, where it
+    // still applies (same triangles), is worse.
+    if stale.as_ref().stats().sample_points > 0 && case.name != "remove" {
+        let stale_err = rel_rms(&scene, stale.as_ref(), scratch.as_ref());
+        eprintln!("  stale cache: {stale_err:.4}");
+        assert!(stale_err > 1.5 * err, "{}: stale {stale_err:.4}", case.name);
+    }
+}
+
+const CASES: [EditCase; 3] = [
+    EditCase {
+        name: "move",
+        world: move_block,
+        scene: move_block_scene,
+    },
+    EditCase {
+        name: "recolour",
+        world: recolour,
+        scene: recolour_scene,
+    },
+    EditCase {
+        name: "remove",
+        world: remove,
+        scene: remove_scene,
+    },
+];
+
+#[test]
+fn incremental_rebakes_agree_with_scratch_lightmap() {
+    for case in &CASES {
+        check_edit(Method::Lightmap, case);
+    }
+}
+
+#[test]
+fn incremental_rebakes_agree_with_scratch_irradiance_map() {
+    for case in &CASES {
+        check_edit(Method::IrradianceMap, case);
+    }
+}
+
+#[test]
+fn added_entity_is_baked_and_removed_entity_textures_disappear() {
+    let scene = scenes::cornell();
+    let (mut world, mut schedule, entities) = world_with(&scene, config(Method::Lightmap));
+    bake(&mut world, &mut schedule);
+    let block = entity_named(&mut world, "short_block");
+    assert!(
+        world
+            .resource::<PublishedLightmaps>()
+            .by_entity
+            .contains_key(&block)
+    );
+    // Add a copy of the tall block, moved: re-baked incrementally, published.
+    let tall = scene
+        .instances
+        .iter()
+        .find(|i| i.name == "tall_block")
+        .unwrap();
+    let added = world
+        .spawn((
+            surfcache_ecs::MeshGeometry(tall.mesh.clone()),
+            SurfaceMaterial(tall.material.clone()),
+            WorldTransform(Affine3A::from_translation(Vec3::new(0.0, 0.0, 0.2)) * tall.transform),
+            InstanceName("tall_block_copy".into()),
+        ))
+        .id();
+    let done = bake(&mut world, &mut schedule);
+    assert!(done.incremental);
+    assert!(done.updated.contains(&added));
+    let published = world.resource::<PublishedLightmaps>();
+    assert!(published.by_entity[&added].front.is_some());
+    assert_eq!(published.generation, done.generation);
+    // Remove the short block: its textures disappear, the others stay.
+    world.despawn(block);
+    let done = bake(&mut world, &mut schedule);
+    assert!(done.incremental);
+    assert_eq!(done.removed, vec![block]);
+    let published = world.resource::<PublishedLightmaps>();
+    assert!(!published.by_entity.contains_key(&block));
+    assert!(published.by_entity.contains_key(&entities[0]));
+    assert_eq!(published.by_entity.len(), scene.instances.len());
+}
+
+#[test]
+fn environment_change_rebakes_from_scratch() {
+    let scene = scenes::cornell();
+    let (mut world, mut schedule, _) = world_with(&scene, config(Method::Lightmap));
+    bake(&mut world, &mut schedule);
+    let mut q = world.query::<&mut EnvironmentLight>();
+    for mut env in q.iter_mut(&mut world) {
+        env.0 = Environment::uniform(Vec3::splat(0.5));
+    }
+    let done = bake(&mut world, &mut schedule);
+    assert!(
+        !done.incremental,
+        "a new sky lights everything: a full re-bake"
+    );
+}
+
+/// An edit while the first bake is in flight supersedes it: it never publishes, and
+/// what is published is exactly the from-scratch bake of the edited scene.
+#[test]
+fn edit_during_a_bake_never_publishes_the_old_scene() {
+    let before = scenes::cornell();
+    let (mut world, mut schedule, _) = world_with(&before, config(Method::Lightmap));
+    // Run until the first bake is under way.
+    while !world.resource::<surfcache_ecs::BakeStatus>().running {
+        SurfcachePlugin::update(&mut world, &mut schedule);
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    move_block(&mut world);
+    let done = bake(&mut world, &mut schedule);
+    assert!(
+        !done.incremental,
+        "no bake had finished: this one starts from scratch"
+    );
+    assert_eq!(
+        done.generation,
+        world.resource::<TracedSceneResource>().generation
+    );
+    let (scene, cache) = baked(&world);
+    let mut after = before.clone();
+    move_block_scene(&mut after);
+    let (mut w2, mut s2, _) = world_with(&after, config(Method::Lightmap));
+    bake(&mut w2, &mut s2);
+    let (scratch_scene, scratch) = baked(&w2);
+    assert_eq!(scene.positions, scratch_scene.positions);
+    assert_eq!(cache.publish(&scene), scratch.publish(&scratch_scene));
+}
+
+/// The same bake whatever the pacing: background with small or large steps, or on the
+/// frame thread within a 1 ms or 20 ms budget, gives identical textures.
+#[test]
+fn results_are_identical_across_frame_budgets() {
+    let scene = scenes::cornell();
+    let mut results = Vec::new();
+    for (mode, points) in [
+        (BakeMode::Background, 64),
+        (BakeMode::Background, 4096),
+        (
+            BakeMode::Foreground {
+                budget: Duration::from_millis(1),
+            },
+            16,
+        ),
+        (
+            BakeMode::Foreground {
+                budget: Duration::from_millis(20),
+            },
+            256,
+        ),
+    ] {
+        let config = BakeConfig {
+            mode,
+            points_per_step: points,
+            ..config(Method::IrradianceMap)
+        };
+        let (mut world, mut schedule, _) = world_with(&scene, config);
+        bake(&mut world, &mut schedule);
+        let published = world.resource::<PublishedLightmaps>().clone();
+        results.push(published);
+    }
+    for r in &results[1..] {
+        assert_eq!(r, &results[0]);
+    }
+}
