@@ -42,11 +42,14 @@ use crate::{
 use glam::{Vec2, Vec3};
 use std::sync::Arc;
 use surfcache_core::sampling::splitmix64;
-use surfcache_trace::{IrradianceLookup, TracedScene};
+use surfcache_trace::{EstimatorSettings, IrradianceLookup, TracedScene};
 
 /// Indirect-change stages after the direct one: each propagates the previous stage's
 /// change by one more bounce (module docs).
 pub const INDIRECT_STAGES: u32 = 3;
+
+/// The error bound of the indirect stages relative to the bake's.
+pub const INDIRECT_ERROR_FACTOR: f32 = 2.0;
 
 /// What an edit changed, in the terms a re-bake needs.
 #[derive(Clone, Debug)]
@@ -142,9 +145,15 @@ impl IncrementalJob {
             };
             let identity: Arc<Vec<u32>> = Arc::new((0..scene.triangle_count() as u32).collect());
             let cache = latest.remap(scene, scene, &identity);
+            // Indirect changes are a bounce weaker than the direct one: their estimates
+            // may carry twice the error share (INDIRECT_ERROR_FACTOR).
+            let estimator = EstimatorSettings {
+                max_rel_error: settings.estimator.max_rel_error * INDIRECT_ERROR_FACTOR,
+                ..settings.estimator
+            };
             Baker::new(
                 cache,
-                settings.estimator,
+                estimator,
                 settings.seed ^ splitmix64(0x696e_6469_7265_6374 + k as u64),
             )
             .with_gather(latest)

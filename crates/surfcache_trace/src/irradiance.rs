@@ -369,6 +369,7 @@ pub fn estimate_change(
     {
         return Estimate {
             value: prior,
+            std_error: with_prior_error(prior, Vec3::ZERO, settings),
             ..Default::default()
         };
     }
@@ -410,22 +411,33 @@ pub fn estimate_change(
     // new, dim one; a fresh estimate of E is then cheaper.
     let probe_samples = CHANGE_PROBE_SAMPLES.min(settings.max_samples);
     let probe = change(probe_samples);
-    let mut e = if probe.samples < probe_samples || probe.rel_error <= bound {
-        probe
+    let (mut e, fresh) = if probe.samples < probe_samples || probe.rel_error <= bound {
+        (probe, false)
     } else {
         let projected = probe.samples as f32 * (probe.rel_error / bound).powi(2);
-        let mut e = if projected > CHANGE_FALLBACK_FACTOR * settings.min_samples as f32 {
-            estimate(
+        let (mut e, fresh) = if projected > CHANGE_FALLBACK_FACTOR * settings.min_samples as f32 {
+            let e = estimate(
                 new.scene, &new.point, new.origin, settings, seed, key, new.gather,
-            )
+            );
+            (e, true)
         } else {
-            change(settings.max_samples)
+            (change(settings.max_samples), false)
         };
         e.rays += probe.rays;
-        e
+        (e, fresh)
     };
+    if !fresh {
+        e.std_error = with_prior_error(e.value, e.std_error, settings);
+    }
     e.rays += punctual_rays as u64;
     e
+}
+
+/// The standard error of prior + change: the prior's, taken at the bound its estimate
+/// met (its own is not kept), and the change's `se`, added in quadrature.
+fn with_prior_error(value: Vec3, se: Vec3, settings: &EstimatorSettings) -> Vec3 {
+    let prior = settings.max_rel_error * (value.abs() + Vec3::splat(settings.floor));
+    (se * se + prior * prior).map(f32::sqrt)
 }
 
 /// The adaptive loop of [`estimate`] and [`estimate_change`]: draws X = `draw(root, rng)`
