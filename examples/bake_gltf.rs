@@ -15,9 +15,7 @@ use bevy_ecs::prelude::*;
 use std::{path::Path, time::Duration};
 use surfcache::{
     core::Environment,
-    ecs::{
-        BakeConfig, BakeStatus, InstanceName, PublishedLightmaps, SurfcachePlugin, spawn_scene,
-    },
+    ecs::{BakeConfig, BakeStatus, InstanceName, PublishedLightmaps, SurfcachePlugin, spawn_scene},
     io::{load_scene, read_environment_map, write_rgb_exr},
 };
 

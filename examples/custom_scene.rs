@@ -96,7 +96,10 @@ fn main() {
 
     let lightmaps = world.resource::<PublishedLightmaps>();
     for (name, entity) in [("floor", floor), ("box", block)] {
-        let front = lightmaps.by_entity[&entity].front.as_ref().expect("front side");
+        let front = lightmaps.by_entity[&entity]
+            .front
+            .as_ref()
+            .expect("front side");
         println!(
             "{name}: {}x{} texels, UV rectangle {:?}, {} triangles addressed by UV1",
             front.width,

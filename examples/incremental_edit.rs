@@ -37,11 +37,11 @@ use surfcache::{
         sampling::Rng,
         scenes,
     },
-    io::{load_scene, read_environment_map},
     ecs::{
         BakeConfig, BakeFinished, InstanceName, SurfaceCacheResource, SurfcachePlugin,
         WorldTransform, spawn_scene,
     },
+    io::{load_scene, read_environment_map},
     trace::TracedScene,
 };
 
@@ -190,7 +190,11 @@ fn main() {
             settings.gather_passes = 0;
             settings.estimator.max_rel_error = 0.05;
             let (scene, name) = sponza();
-            (scene, name, Affine3A::from_translation(Vec3::new(0.5, 0.0, 0.0)))
+            (
+                scene,
+                name,
+                Affine3A::from_translation(Vec3::new(0.5, 0.0, 0.0)),
+            )
         }
         other => panic!("unknown --scene {other} (cornell, sponza)"),
     };

@@ -1,7 +1,9 @@
 //! Bakes and re-bakes of the surface cache, off the frame.
 //!
-//! **Invalidation policy** ([`start_bake`], DESIGN.md §6). Each new traced scene starts a
-//! bake, and supersedes (cancels) one in flight. It re-bakes *incrementally* from the
+//! **Invalidation policy** ([`start_bake`], DESIGN.md §6). Each new traced scene, and
+//! each change of [`BakeConfig`], starts a bake and supersedes (cancels) one in flight;
+//! when nothing changed that the baseline depends on, the baseline is published again
+//! as it is. It re-bakes *incrementally* from the
 //! last finished bake (the *baseline*) when
 //! - a baseline exists and was baked with the same [`BakeSettings`],
 //! - neither lights nor the environment changed since (they light every surface),
@@ -186,6 +188,8 @@ struct Run {
     job: Job,
     scene: Arc<TracedScene>,
     entities: Vec<Entity>,
+    /// Which bake this is ([`Baking::bake_id`]).
+    id: u64,
     generation: u64,
     incremental: bool,
     previous: Option<Arc<PublishedLightmaps>>,
@@ -245,7 +249,7 @@ impl Run {
 
 /// The background side of a bake in flight.
 struct Worker {
-    generation: u64,
+    id: u64,
     cancel: Arc<AtomicBool>,
     status: Arc<Mutex<BakeStatus>>,
     /// (A `Mutex` only to make the resource `Sync`; one system reads it.)
@@ -261,6 +265,8 @@ pub struct Baking {
     global: bool,
     /// The newest traced-scene generation a bake was started for.
     started: u64,
+    /// Counts started bakes; only the newest may publish.
+    bake_id: u64,
     worker: Option<Worker>,
     /// (A `Mutex` only to make the resource `Sync`; one system steps it.)
     foreground: Option<Mutex<Run>>,
@@ -399,8 +405,11 @@ pub fn start_bake(
     mut baking: ResMut<Baking>,
     mut traced: ResMut<TracedSceneResource>,
     mut status: ResMut<BakeStatus>,
+    mut finished: ResMut<crate::publish::FinishedBake>,
 ) {
-    if traced.generation == baking.started || !config.enabled {
+    // A new scene, or new settings (or baking switched on), start a bake.
+    let new_scene = traced.generation != baking.started;
+    if !config.enabled || !(new_scene || config.is_changed()) {
         return;
     }
     let Some(scene) = traced.scene().cloned() else {
@@ -411,13 +420,24 @@ pub fn start_bake(
     baking.global |= changes.global;
     baking.started = traced.generation;
     baking.cancel();
+    baking.bake_id += 1;
     let entities = traced.entities.clone();
     let (job, incremental) = match plan(&config, &baking, &scene, &entities) {
         Plan::Bake(job, incremental) => (job, incremental),
         Plan::Unchanged => {
+            // The baseline holds: published again as it is, nothing updated.
             if let Some(base) = baking.baseline.as_mut() {
                 base.scene = scene;
                 base.entities = entities;
+                finished.0 = Some(Finished {
+                    generation: traced.generation,
+                    incremental: true,
+                    seconds: 0.0,
+                    scene: base.scene.clone(),
+                    entities: base.entities.clone(),
+                    outcome: base.outcome.clone(),
+                    published: base.published.clone(),
+                });
             }
             baking.changed.clear();
             return;
@@ -427,6 +447,7 @@ pub fn start_bake(
         job,
         scene,
         entities,
+        id: baking.bake_id,
         generation: traced.generation,
         incremental,
         previous: baking.baseline.as_ref().map(|b| b.published.clone()),
@@ -464,7 +485,7 @@ fn spawn_worker(mut run: Run, pool: Arc<rayon::ThreadPool>, points: usize) -> Wo
     }));
     let (tx, rx) = channel();
     let worker = Worker {
-        generation: run.generation,
+        id: run.id,
         cancel: cancel.clone(),
         status: status.clone(),
         result: Mutex::new(rx),
@@ -513,18 +534,18 @@ pub fn step_bake(
         match received {
             Err(TryRecvError::Empty) => {}
             Ok(result) => {
-                let generation = w.generation;
+                let id = w.id;
                 baking.worker = None;
-                accept(&mut baking, &mut status, &mut finished, generation, result);
+                accept(&mut baking, &mut status, &mut finished, id, result);
             }
             Err(TryRecvError::Disconnected) => {
-                let generation = w.generation;
+                let id = w.id;
                 baking.worker = None;
                 accept(
                     &mut baking,
                     &mut status,
                     &mut finished,
-                    generation,
+                    id,
                     Err("internal error: the bake thread panicked".into()),
                 );
             }
@@ -545,21 +566,21 @@ pub fn step_bake(
     }
     *status = run.status(&run.job.progress());
     if done && let Some(run) = baking.foreground.take().and_then(|r| r.into_inner().ok()) {
-        let generation = run.generation;
+        let id = run.id;
         let result = run.finish();
-        accept(&mut baking, &mut status, &mut finished, generation, result);
+        accept(&mut baking, &mut status, &mut finished, id, result);
     }
 }
 
-/// Makes a finished bake of the newest scene the baseline and queues it for publishing.
+/// Makes the newest bake, once finished, the baseline and queues it for publishing.
 fn accept(
     baking: &mut Baking,
     status: &mut BakeStatus,
     finished: &mut crate::publish::FinishedBake,
-    generation: u64,
+    id: u64,
     result: Result<Finished, String>,
 ) {
-    if generation != baking.started {
+    if id != baking.bake_id {
         return;
     }
     match result {

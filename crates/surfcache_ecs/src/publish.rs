@@ -129,7 +129,23 @@ pub fn publish(
         return;
     };
     let published = Arc::unwrap_or_clone(f.published);
-    let mut updated: Vec<Entity> = published.changed_at(f.generation).collect();
+    let same = |a: &Option<Arc<IrradianceTexture>>, b: &Option<Arc<IrradianceTexture>>| match (a, b)
+    {
+        (None, None) => true,
+        (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+        _ => false,
+    };
+    let mut updated: Vec<Entity> = published
+        .by_entity
+        .iter()
+        .filter(|(e, new)| {
+            lightmaps
+                .by_entity
+                .get(e)
+                .is_none_or(|old| !same(&old.front, &new.front) || !same(&old.back, &new.back))
+        })
+        .map(|(e, _)| *e)
+        .collect();
     updated.sort();
     let mut removed: Vec<Entity> = lightmaps
         .by_entity

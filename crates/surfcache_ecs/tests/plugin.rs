@@ -342,3 +342,24 @@ fn results_are_identical_across_frame_budgets() {
         assert_eq!(r, &results[0]);
     }
 }
+
+/// New settings re-bake from scratch; the same settings written again re-publish the
+/// baseline without baking.
+#[test]
+fn settings_changes_rebake_and_unchanged_settings_republish() {
+    let scene = scenes::cornell();
+    let (mut world, mut schedule, _) = world_with(&scene, config(Method::Lightmap));
+    let first = bake(&mut world, &mut schedule);
+    let published = world.resource::<PublishedLightmaps>().clone();
+    world.insert_resource(config(Method::Lightmap));
+    let again = bake(&mut world, &mut schedule);
+    assert!(again.updated.is_empty() && again.removed.is_empty());
+    assert_eq!(again.generation, first.generation);
+    assert_eq!(world.resource::<PublishedLightmaps>(), &published);
+    world.insert_resource(config(Method::IrradianceMap));
+    let other = bake(&mut world, &mut schedule);
+    assert!(!other.incremental);
+    assert_eq!(other.updated.len(), scene.instances.len());
+    let (_, cache) = baked(&world);
+    assert_eq!(cache.method(), Method::IrradianceMap);
+}
