@@ -512,8 +512,8 @@ fn periscope(a: f32, h: f32, l: f32) -> Mesh {
 ///   could not rule out. At the end wall no estimate stops black before `max_samples`,
 ///   most catch the rare paths, and the few that stay black say they have not converged.
 ///   A light-tight box stays exactly black at a bounded cost (about 184/bound samples a
-///   point); points inside closed geometry (every first ray hits a back face) still stop
-///   at `min_samples`.
+///   point); points inside geometry (most first rays hit a back face: buried samples,
+///   which caches discard) still stop at `min_samples`.
 /// - A [`BakeJob`] with its default two gathering pre-passes. Every path of a later pass
 ///   ends at its first hit y with ρ/π · E_prev(y) from the previous pass's irradiance
 ///   maps, so nearly every sample at the tunnel's end carries light: every estimate there

@@ -300,9 +300,10 @@ pub fn hemisphere_sample(
 ///
 /// A run whose samples are all exactly zero is not taken as converged at 0 until the
 /// light it could have missed is below the bound ([`ZERO_RUN_EVENTS`]; needs a floor
-/// ε > 0, which sets the scale), except where every first ray hit the back of a
-/// single-sided surface: such a point lies inside closed geometry (a buried sample that
-/// caches discard), and keeps stopping at `min_samples`.
+/// ε > 0, which sets the scale), except where most first rays hit the back of a
+/// single-sided surface: such a point lies inside geometry (a buried sample, which the
+/// caches discard at their default `buried_threshold` of 0.5), and keeps stopping at
+/// `min_samples`.
 ///
 /// With `gather`, paths end at their first hit with the lookup's irradiance there (final
 /// gathering, see [`IrradianceLookup`]); without, they are traced to the end.
@@ -426,8 +427,8 @@ pub fn estimate_change(
 /// points or from the stream) until C = se / (|offset + mean| + ε) ≤ `bound` from `min`
 /// samples on, or `settings.max_samples`; the value is offset + mean.
 ///
-/// `unseen` > 0: while every sample is exactly zero (and not every first ray hit a back
-/// face), the standard error is at least [`zero_run_std_error`]`(n, unseen)` in every
+/// `unseen` > 0: while every sample is exactly zero (and at most half the first rays hit a
+/// back face), the standard error is at least [`zero_run_std_error`]`(n, unseen)` in every
 /// channel, compared with the brightest channel of the value (the missed light's colour is
 /// unknown).
 #[allow(clippy::too_many_arguments)]
@@ -517,8 +518,8 @@ pub fn zero_run_std_error(n: u32, unseen: f64) -> f64 {
 }
 
 /// (standard error, relative error) of the light an all-zero run may have missed, against
-/// the brightest channel of `total` (0, 0 unless the run is all zero, `unseen` > 0 and not
-/// every first ray hit a back face).
+/// the brightest channel of `total` (0, 0 unless the run is all zero, `unseen` > 0 and at
+/// most half the first rays hit a back face).
 fn zero_run_error(
     n: u32,
     lit: u32,
@@ -527,7 +528,7 @@ fn zero_run_error(
     total: DVec3,
     floor: f64,
 ) -> (f64, f64) {
-    if lit > 0 || back == n || unseen <= 0.0 {
+    if lit > 0 || 2 * back > n || unseen <= 0.0 {
         return (0.0, 0.0);
     }
     let se = zero_run_std_error(n, unseen);
