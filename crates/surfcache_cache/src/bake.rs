@@ -18,8 +18,10 @@ use surfcache_trace::{
     TracedScene, estimate, estimate_change,
 };
 
-/// The relative-error floor ε is this fraction of the scene's mean irradiance.
-pub const FLOOR_FRACTION: f32 = 0.01;
+/// The relative-error floor ε is this fraction of the scene's mean irradiance (defined by
+/// the estimator, which also takes ε / `FLOOR_FRACTION` as the scale of light an all-zero
+/// run of samples may have missed: [`surfcache_trace::ZERO_RUN_EVENTS`]).
+pub use surfcache_trace::FLOOR_FRACTION;
 
 /// The point and ray origin at which `site` is estimated.
 ///

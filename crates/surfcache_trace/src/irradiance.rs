@@ -72,6 +72,26 @@ impl Sampler {
     }
 }
 
+/// The relative-error floor ε of a bake is this fraction of the scene's mean irradiance
+/// (`surfcache_cache::bake`); conversely ε / `FLOOR_FRACTION` is the irradiance scale of
+/// the scene, the scale [`estimate`] gives light it has not seen (see [`ZERO_RUN_EVENTS`]).
+pub const FLOOR_FRACTION: f32 = 0.01;
+
+/// Light events that a run of n samples which are all exactly zero cannot rule out.
+///
+/// Zero samples have no spread, so the thesis' standard error of such a run is 0 and
+/// C = 0 would stop it at `min_samples`, black, however rare but bright the paths that
+/// carry light (a deep niche: "black blotches"). With k ≥ 1 samples carrying light X₊
+/// the sample variance is already of the order k·X₊²/n², the size of the rare-event
+/// uncertainty; only k = 0 is degenerate. Such a run is therefore given the standard
+/// error of the light it could have missed: a Poisson count of zero events bounds their
+/// rate at `ZERO_RUN_EVENTS`/n at 84 % (one-sided 1σ, the confidence the rule C ≤ bound
+/// means elsewhere; the "rule of three" is the 95 % bound), each carrying about the
+/// scene's irradiance scale S = ε / [`FLOOR_FRACTION`]. It stops once
+/// 1.84·S/n ≤ bound · (E + ε), i.e. after about 184 / bound samples where nothing
+/// else lights the point (or at `max_samples`).
+pub const ZERO_RUN_EVENTS: f64 = 1.841;
+
 /// Independent randomised QMC replicates: sample `k` of a point belongs to replicate
 /// `k mod R`. The standard error comes from the spread of the replicate means, which
 /// (unlike the spread of single samples) sees the stratification's gain.
@@ -278,6 +298,13 @@ pub fn hemisphere_sample(
 /// the standard error from single samples (the thesis' formula); quasi-random ones from
 /// the spread of [`QMC_REPLICATES`] independently scrambled replicates.
 ///
+/// A run whose samples are all exactly zero is not taken as converged at 0 until the
+/// light it could have missed is below the bound ([`ZERO_RUN_EVENTS`]; needs a floor
+/// ε > 0, which sets the scale), except where most first rays hit the back of a
+/// single-sided surface: such a point lies inside geometry (a buried sample, which the
+/// caches discard at their default `buried_threshold` of 0.5), and keeps stopping at
+/// `min_samples`.
+///
 /// With `gather`, paths end at their first hit with the lookup's irradiance there (final
 /// gathering, see [`IrradianceLookup`]); without, they are traced to the end.
 pub fn estimate(
@@ -304,6 +331,7 @@ pub fn estimate(
         punctual,
         settings.max_rel_error,
         settings.min_samples,
+        settings.floor as f64 / FLOOR_FRACTION as f64,
         |root, rng| {
             let (x, path) = hemisphere_sample(&at, settings, root, rng, None);
             (x, path.first_hit, path.rays)
@@ -343,10 +371,12 @@ pub const CHANGE_FALLBACK_FACTOR: f32 = 2.0;
 /// touch a path the difference is exactly zero and the estimate stops after
 /// [`CHANGE_MIN_SAMPLES`] pairs; it stops when its standard error is at most
 /// [`CHANGE_ERROR_SHARE`] × bound × (E + ε). Unbiased: E = E_old + E[X_new − X_old].
-/// The punctual lights' exact parts enter as their difference too. When a probe of
-/// [`CHANGE_PROBE_SAMPLES`] pairs projects the change to need more than
-/// [`CHANGE_FALLBACK_FACTOR`] × `min_samples` pairs, E is estimated afresh instead
-/// ([`estimate`] in the edited scene, with its gathering lookup).
+/// The punctual lights' exact parts enter as their difference too. An all-zero run of
+/// differences is exact where no path meets the edit, so it stops as it is (no
+/// [`ZERO_RUN_EVENTS`] bound: a re-bake would otherwise sample every untouched point
+/// hundreds of times). When a probe of [`CHANGE_PROBE_SAMPLES`] pairs projects the
+/// change to need more than [`CHANGE_FALLBACK_FACTOR`] × `min_samples` pairs, E is
+/// estimated afresh instead ([`estimate`] in the edited scene, with its gathering lookup).
 ///
 /// With `focus`, only directions in that cone can differ (the edit lies inside it, and
 /// both scenes' gathering lookups agree elsewhere): the change is integrated over the
@@ -393,6 +423,7 @@ pub fn estimate_change(
             prior + punctual_new - punctual_old,
             bound,
             CHANGE_MIN_SAMPLES,
+            0.0,
             |root, rng| {
                 let mut twin = rng.clone();
                 let (x_new, path_new) = hemisphere_sample(new, &settings, root, rng, focus);
@@ -444,6 +475,12 @@ fn with_prior_error(value: Vec3, se: Vec3, settings: &EstimatorSettings) -> Vec3
 /// in rounds of [`QMC_REPLICATES`] (root dimensions from per-replicate scrambled Sobol
 /// points or from the stream) until C = se / (|offset + mean| + ε) ≤ `bound` from `min`
 /// samples on, or `settings.max_samples`; the value is offset + mean.
+///
+/// `unseen` > 0: while every sample is exactly zero (and at most half the first rays hit a
+/// back face), the standard error is at least [`zero_run_std_error`]`(n, unseen)` in every
+/// channel, compared with the brightest channel of the value (the missed light's colour is
+/// unknown).
+#[allow(clippy::too_many_arguments)]
 fn sample_adaptively(
     settings: &EstimatorSettings,
     seed: u64,
@@ -451,6 +488,7 @@ fn sample_adaptively(
     offset: Vec3,
     bound: f32,
     min: u32,
+    unseen: f64,
     mut draw: impl FnMut([f32; 5], &mut Rng) -> (Vec3, FirstHit, u32),
 ) -> Estimate {
     let sampler = settings.sampler;
@@ -458,7 +496,7 @@ fn sample_adaptively(
     let floor = settings.floor as f64;
     let max = settings.max_samples.max(1);
     let min = min.clamp(1, max);
-    let (mut back, mut rays) = (0u32, 0u64);
+    let (mut back, mut rays, mut lit) = (0u32, 0u64, 0u32);
     // Pseudo-random: one accumulator. Quasi-random: one per replicate.
     let mut single = Accumulator::default();
     let mut replicates = [Accumulator::default(); QMC_REPLICATES as usize];
@@ -483,6 +521,7 @@ fn sample_adaptively(
             };
             let (x, first_hit, path_rays) = draw(root, &mut rng);
             back += (first_hit == FirstHit::Back) as u32;
+            lit += (x != Vec3::ZERO) as u32;
             rays += path_rays as u64;
             if sampler.quasi_random() {
                 replicates[(n % QMC_REPLICATES) as usize].add(x);
@@ -497,8 +536,10 @@ fn sample_adaptively(
             (single.mean(), single.std_error())
         };
         let total = (mean + offset.as_dvec3()).abs();
-        if n >= max || (n >= min && relative_error(total, se, floor) <= bound as f64) {
-            break (mean, se);
+        let zero_run = zero_run_error(n, lit, back, unseen, total, floor);
+        let c = relative_error(total, se, floor).max(zero_run.1);
+        if n >= max || (n >= min && c <= bound as f64) {
+            break (mean, se.max(DVec3::splat(zero_run.0)));
         }
     };
     let value = (mean + offset.as_dvec3()).as_vec3();
@@ -507,14 +548,40 @@ fn sample_adaptively(
     } else {
         std_error.as_vec3()
     };
+    let zero_run = zero_run_error(n, lit, back, unseen, value.as_dvec3().abs(), floor).1;
     Estimate {
         value,
         std_error,
         samples: n,
-        rel_error: relative_error(value.as_dvec3().abs(), std_error.as_dvec3(), floor) as f32,
+        rel_error: relative_error(value.as_dvec3().abs(), std_error.as_dvec3(), floor).max(zero_run)
+            as f32,
         back_face_share: back as f32 / n as f32,
         rays,
     }
+}
+
+/// The standard error [`ZERO_RUN_EVENTS`] × `unseen` / n of a run of `n` samples that are
+/// all exactly zero, where light events would each carry about `unseen`.
+pub fn zero_run_std_error(n: u32, unseen: f64) -> f64 {
+    ZERO_RUN_EVENTS * unseen / n.max(1) as f64
+}
+
+/// (standard error, relative error) of the light an all-zero run may have missed, against
+/// the brightest channel of `total` (0, 0 unless the run is all zero, `unseen` > 0 and at
+/// most half the first rays hit a back face).
+fn zero_run_error(
+    n: u32,
+    lit: u32,
+    back: u32,
+    unseen: f64,
+    total: DVec3,
+    floor: f64,
+) -> (f64, f64) {
+    if lit > 0 || 2 * back > n || unseen <= 0.0 {
+        return (0.0, 0.0);
+    }
+    let se = zero_run_std_error(n, unseen);
+    (se, se / (total.max_element() + floor))
 }
 
 /// Mean and standard error from randomised QMC replicates: the mean of all samples, and
