@@ -113,6 +113,8 @@ pub struct BakeStatus {
     pub seconds: f64,
     /// Why the last bake failed, if it did.
     pub error: Option<String>,
+    /// The job's own figures (pass, round, points done and pending).
+    pub job: JobProgress,
 }
 
 /// The finished surface cache of the newest baked scene.
@@ -243,6 +245,7 @@ impl Run {
                 .then(|| seconds * (1.0 - fraction as f64) / fraction as f64),
             seconds,
             error: None,
+            job: *progress,
         }
     }
 }
