@@ -3,10 +3,10 @@
 
 use crate::{
     bake_dir::{self, StagingDir},
-    scene_args::{EnvArgs, LoadedWorld, with_threads},
+    baking::{self, BakeOptions, Baked, parse_method, parse_sampler},
+    scene_args::{EnvArgs, LoadedWorld},
 };
-use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
+use anyhow::{Result, bail};
 use serde_json::json;
 use std::{
     path::PathBuf,
@@ -14,14 +14,12 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    time::Instant,
 };
 use surfcache_cache::{
-    CacheSettings, Method, SurfaceCache,
+    Method, SurfaceCache,
     archive::BakeArchive,
-    bake::{BakeJob, BakeSettings, DEFAULT_GATHER_PASSES, FLOOR_FRACTION},
+    bake::{DEFAULT_GATHER_PASSES, FLOOR_FRACTION},
 };
-use surfcache_trace::{EstimatorSettings, Sampler};
 
 /// `surfcache bake` options (CONTRACT.md, plus the project's own).
 #[derive(clap::Args)]
@@ -79,49 +77,32 @@ pub struct BakeArgs {
 pub fn run(args: BakeArgs) -> Result<()> {
     let method = match &args.method {
         None => Method::default(),
-        Some(m) => Method::from_name(m).with_context(|| {
-            let known: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
-            format!("unknown method '{m}' (known: {})", known.join(", "))
-        })?,
+        Some(m) => parse_method(m)?,
     };
-    let Some(sampler) = Sampler::from_name(&args.sampler) else {
-        let known: Vec<&str> = Sampler::ALL.iter().map(|s| s.name()).collect();
-        bail!(
-            "unknown sampler '{}' (known: {})",
-            args.sampler,
-            known.join(", ")
-        );
-    };
-    if !(args.max_rel_error.is_finite() && args.max_rel_error > 0.0) {
-        bail!("--max-rel-error must be a positive number");
-    }
-    let defaults = EstimatorSettings::default();
-    let min_samples = args.min_samples.unwrap_or(defaults.min_samples);
-    let max_samples = args
-        .max_samples
-        .unwrap_or(defaults.max_samples.max(min_samples));
-    if min_samples == 0 || max_samples < min_samples {
-        bail!("need 1 ≤ --min-samples ≤ --max-samples (got {min_samples} and {max_samples})");
-    }
+    let sampler = parse_sampler(&args.sampler)?;
     let both_sides = match args.sides.as_str() {
         "both" => true,
         "front" => false,
         other => bail!("unknown --sides '{other}' (known: both, front)"),
     };
-    let mut cache_settings = CacheSettings::for_method(method);
-    cache_settings.set_both_sides(both_sides);
-    if let Some(d) = args.density {
-        if !(d.is_finite() && d > 0.0) {
-            bail!("--density must be a positive number");
-        }
-        cache_settings.set_density(d);
-    }
-    if let Some(e) = args.interpolation_error {
-        if !(e.is_finite() && e > 0.0) {
-            bail!("--interpolation-error must be a positive number");
-        }
-        cache_settings.set_interpolation_error(e);
-    }
+    let options = BakeOptions {
+        method,
+        sampler,
+        max_rel_error: args.max_rel_error,
+        min_samples: args.min_samples,
+        max_samples: args.max_samples,
+        bounces: args.bounces,
+        seed: args.seed,
+        density: args.density,
+        interpolation_error: args.interpolation_error,
+        gather: args.gather,
+        both_sides,
+    };
+    let settings = options.settings()?;
+    let (min_samples, max_samples) = (
+        settings.estimator.min_samples,
+        settings.estimator.max_samples,
+    );
     let staging = StagingDir::create(&args.out)?;
 
     let loaded = LoadedWorld::load(&args.scene, &args.env)?;
@@ -134,64 +115,22 @@ pub fn run(args: BakeArgs) -> Result<()> {
         let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::SeqCst));
     }
     let threads = args.threads;
-    if args.gather > 4 {
-        bail!("--gather takes at most 4 pre-passes");
-    }
-    let settings = BakeSettings {
-        cache: cache_settings,
-        estimator: EstimatorSettings {
-            sampler,
-            max_rel_error: args.max_rel_error,
-            min_samples,
-            max_samples,
-            floor: 0.0,
-            max_bounces: args.bounces,
-        },
-        seed: args.seed,
-        gather_passes: args.gather,
-    };
-    let start = Instant::now();
-    let (cache, progress, settings) = with_threads(threads, || -> Result<_> {
-        let mut job = BakeJob::new(settings);
-        let bar = ProgressBar::new_spinner().with_style(
-            ProgressStyle::with_template("bake {spinner} {msg} [{elapsed_precise}]")
-                .expect("static template"),
+    let Some(Baked {
+        cache,
+        progress,
+        settings,
+        seconds: bake_seconds,
+    }) = baking::bake(&scene, settings, threads, &|_| {
+        cancel.load(Ordering::SeqCst)
+    })?
+    else {
+        bail!(
+            "interrupted: nothing was written to '{}'",
+            args.out.display()
         );
-        while !job.step(&scene, 1024) {
-            if cancel.load(Ordering::SeqCst) {
-                bar.finish_and_clear();
-                bail!(
-                    "interrupted: nothing was written to '{}'",
-                    args.out.display()
-                );
-            }
-            let p = job.progress();
-            let secs = start.elapsed().as_secs_f64().max(1e-9);
-            bar.set_message(format!(
-                "pass {}/{} round {}: {} points done, {} pending, {:.1} Mrays/s",
-                p.pass + 1,
-                p.passes,
-                p.current.rounds + 1,
-                p.current.points_done,
-                p.current.points_pending,
-                p.rays as f64 / secs / 1e6
-            ));
-            bar.tick();
-        }
-        bar.finish_and_clear();
-        let mut outcome = job
-            .into_outcome()
-            .context("internal error: the bake did not finish")?;
-        let cache = outcome
-            .passes
-            .pop()
-            .context("internal error: no final pass")?;
-        let cache = Arc::try_unwrap(cache).unwrap_or_else(|shared| (*shared).clone());
-        Ok((cache, outcome.progress, outcome.settings))
-    })??;
+    };
     let floor = settings.estimator.floor;
     let mean = floor / FLOOR_FRACTION;
-    let bake_seconds = start.elapsed().as_secs_f64();
     let stats = cache.stats();
 
     // Outputs: archive for `query`, textures, the scene with UV1, the report.
