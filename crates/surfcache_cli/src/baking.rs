@@ -103,13 +103,13 @@ pub struct Baked {
 }
 
 /// Bakes `settings` on `scene` on a pool of `threads` workers, showing a progress line.
-/// `stop` is asked between steps with the time so far; when it says so the bake is
-/// abandoned and `Ok(None)` returned.
+/// `stop` is asked between steps with the time and progress so far; when it says so the
+/// bake is abandoned and `Ok(None)` returned.
 pub fn bake(
     scene: &TracedScene,
     settings: BakeSettings,
     threads: Option<usize>,
-    stop: &(dyn Fn(Duration) -> bool + Sync),
+    stop: &(dyn Fn(Duration, &JobProgress) -> bool + Sync),
 ) -> Result<Option<Baked>> {
     let start = Instant::now();
     let baked = with_threads(threads, || -> Result<_> {
@@ -119,11 +119,11 @@ pub fn bake(
                 .expect("static template"),
         );
         while !job.step(scene, 1024) {
-            if stop(start.elapsed()) {
+            let p = job.progress();
+            if stop(start.elapsed(), &p) {
                 bar.finish_and_clear();
                 return Ok(None);
             }
-            let p = job.progress();
             let secs = start.elapsed().as_secs_f64().max(1e-9);
             bar.set_message(format!(
                 "pass {}/{} round {}: {} points done, {} pending, {:.1} Mrays/s",

@@ -120,7 +120,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         progress,
         settings,
         seconds: bake_seconds,
-    }) = baking::bake(&scene, settings, threads, &|_| {
+    }) = baking::bake(&scene, settings, threads, &|_, _| {
         cancel.load(Ordering::SeqCst)
     })?
     else {

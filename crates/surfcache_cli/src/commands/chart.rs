@@ -17,7 +17,7 @@ use std::{
     path::{Path, PathBuf},
     time::{Duration, Instant},
 };
-use surfcache_cache::{Method, SurfaceCache};
+use surfcache_cache::{Method, SurfaceCache, bake::JobProgress};
 use surfcache_trace::{Query, Sampler};
 
 mod plot;
@@ -42,8 +42,8 @@ pub struct ChartArgs {
     /// Error bounds for Sponza [default: the --bounds].
     #[arg(long, value_delimiter = ',')]
     sponza_bounds: Option<Vec<f32>>,
-    /// Hemisphere samplers (uniform, cosine, qmc, mis, best).
-    #[arg(long, value_delimiter = ',', default_value = "uniform,cosine,best")]
+    /// Hemisphere samplers (uniform, cosine, qmc, mis, best), baked in this order.
+    #[arg(long, value_delimiter = ',', default_value = "best,uniform,cosine")]
     samplers: Vec<String>,
     /// Methods (vertex, irradiance-map, lightmap).
     #[arg(
@@ -67,11 +67,17 @@ pub struct ChartArgs {
     /// (at least the last bake's time × the bound ratio) exceeds it.
     #[arg(long, default_value_t = 120.0)]
     max_seconds: f64,
-    /// Wall-clock budget of the whole sweep in seconds: once spent, the remaining bakes
+    /// --max-seconds for Sponza.
+    #[arg(long, default_value_t = 300.0)]
+    sponza_max_seconds: f64,
+    /// Wall-clock budget of each scene's sweep in seconds: once spent, its remaining bakes
     /// are skipped (every curve's loose bounds are baked before any tight ones)
     /// [default: none].
     #[arg(long)]
     budget_seconds: Option<f64>,
+    /// --budget-seconds for Sponza [default: --budget-seconds].
+    #[arg(long)]
+    sponza_budget_seconds: Option<f64>,
     /// Use only the first N points of each point set (and reference).
     #[arg(long)]
     points: Option<usize>,
@@ -96,8 +102,10 @@ pub struct SceneSpec {
     irradiance_map_density: Option<f32>,
     lightmap_density: Option<f32>,
     min_samples: Option<u32>,
+    max_samples: Option<u32>,
     gather: u32,
     both_sides: bool,
+    max_seconds: f64,
 }
 
 /// The HDR map Sponza is lit by (in the shared assets' `envmaps/`).
@@ -106,8 +114,9 @@ pub const SPONZA_ENV: &str = "st_fagans_interior_1k.exr";
 /// Sponza's bake settings: what keeps one bake of its 262k triangles to minutes on two
 /// cores (docs/results.md).
 pub const SPONZA_IRRADIANCE_MAP_DENSITY: f32 = 1.0;
-pub const SPONZA_LIGHTMAP_DENSITY: f32 = 4.0;
+pub const SPONZA_LIGHTMAP_DENSITY: f32 = 1.0;
 pub const SPONZA_MIN_SAMPLES: u32 = 16;
+pub const SPONZA_MAX_SAMPLES: u32 = 256;
 
 fn scene_spec(name: &str, args: &ChartArgs) -> Result<Option<SceneSpec>> {
     match name {
@@ -120,8 +129,10 @@ fn scene_spec(name: &str, args: &ChartArgs) -> Result<Option<SceneSpec>> {
             irradiance_map_density: None,
             lightmap_density: None,
             min_samples: None,
+            max_samples: None,
             gather: surfcache_cache::bake::DEFAULT_GATHER_PASSES,
             both_sides: true,
+            max_seconds: args.max_seconds,
         })),
         "sponza" => {
             let gltf = args.shared_assets.join("scenes/sponza_crytek/Sponza.gltf");
@@ -146,8 +157,10 @@ fn scene_spec(name: &str, args: &ChartArgs) -> Result<Option<SceneSpec>> {
                 irradiance_map_density: Some(SPONZA_IRRADIANCE_MAP_DENSITY),
                 lightmap_density: Some(SPONZA_LIGHTMAP_DENSITY),
                 min_samples: Some(SPONZA_MIN_SAMPLES),
+                max_samples: Some(SPONZA_MAX_SAMPLES),
                 gather: 0,
                 both_sides: false,
+                max_seconds: args.sponza_max_seconds,
             }))
         }
         other => bail!("unknown chart scene '{other}' (known: cornell, sponza)"),
@@ -317,8 +330,8 @@ pub fn run(args: ChartArgs) -> Result<()> {
         Some(b) => sort_bounds(b)?,
         None => bounds.clone(),
     };
-    if !(args.max_seconds > 0.0) {
-        bail!("--max-seconds must be positive");
+    if !(args.max_seconds > 0.0 && args.sponza_max_seconds > 0.0) {
+        bail!("--max-seconds and --sponza-max-seconds must be positive");
     }
     if args.points == Some(0) {
         bail!("--points must be at least 1");
@@ -333,9 +346,7 @@ pub fn run(args: ChartArgs) -> Result<()> {
         .collect();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create '{}'", args.out.display()))?;
-    let sweep_start = Instant::now();
-    let budget = args.budget_seconds.map(Duration::from_secs_f64);
-    let max = Duration::from_secs_f64(args.max_seconds);
+    let run_start = Instant::now();
     let mut rows: Vec<Row> = Vec::new();
     let mut settings_notes = String::new();
     for spec in &specs {
@@ -344,6 +355,14 @@ pub fn run(args: ChartArgs) -> Result<()> {
             .iter()
             .map(|r| (r.position, r.irradiance, r.rel_std))
             .collect();
+        let sweep_start = Instant::now();
+        let max = Duration::from_secs_f64(spec.max_seconds);
+        let budget = if spec.name == "sponza" {
+            args.sponza_budget_seconds.or(args.budget_seconds)
+        } else {
+            args.budget_seconds
+        }
+        .map(Duration::from_secs_f64);
         let loaded = LoadedWorld::load(&spec.scene, &spec.env)?;
         let scene = loaded.traced()?;
         let own_noise = compare(
@@ -374,9 +393,12 @@ pub fn run(args: ChartArgs) -> Result<()> {
         // Per curve: the last finished bake (bound, seconds), or why it stopped.
         let mut last: BTreeMap<(usize, usize), (f32, f64)> = BTreeMap::new();
         let mut stopped: BTreeMap<(usize, usize), String> = BTreeMap::new();
-        for &bound in scene_bounds {
-            for (mi, &method) in methods.iter().enumerate() {
-                for (si, &sampler) in samplers.iter().enumerate() {
+        // Sampler by sampler (in the order given), each bound for every method before the
+        // next tighter one: under a budget the first samplers' curves come out whole and
+        // the later ones keep at least their loose ends.
+        for (si, &sampler) in samplers.iter().enumerate() {
+            for &bound in scene_bounds {
+                for (mi, &method) in methods.iter().enumerate() {
                     let key = (mi, si);
                     let mut row = Row {
                         scene: spec.name.into(),
@@ -390,15 +412,15 @@ pub fn run(args: ChartArgs) -> Result<()> {
                     let skip = if let Some(why) = stopped.get(&key) {
                         Some(why.clone())
                     } else if budget.is_some_and(|b| sweep_start.elapsed() >= b) {
-                        Some("the sweep's --budget-seconds was spent".to_string())
+                        Some("the scene's --budget-seconds was spent".to_string())
                     } else if let Some(&(b0, t0)) = last.get(&key) {
                         // Time grows with the square of 1/bound once sampling dominates,
                         // more slowly while fixed costs (minimum samples, pre-passes) do:
                         // growing linearly is the cautious guess.
                         let predicted = t0 * (b0 as f64 / bound as f64);
-                        (predicted > args.max_seconds).then(|| {
+                        (predicted > spec.max_seconds).then(|| {
                             format!(
-                                "predicted at least {predicted:.0} s (from {t0:.0} s at bound {b0}) > --max-seconds"
+                                "predicted at least {predicted:.0} s (from {t0:.0} s at bound {b0}) > the scene's cap (--max-seconds)"
                             )
                         })
                     } else {
@@ -421,7 +443,7 @@ pub fn run(args: ChartArgs) -> Result<()> {
                         sampler,
                         max_rel_error: bound,
                         min_samples: spec.min_samples,
-                        max_samples: None,
+                        max_samples: spec.max_samples,
                         bounces: None,
                         seed: args.seed,
                         density: match method {
@@ -434,17 +456,37 @@ pub fn run(args: ChartArgs) -> Result<()> {
                         both_sides: spec.both_sides,
                     };
                     let elapsed_at_start = sweep_start.elapsed();
-                    let stop =
-                        |t: Duration| t > max || budget.is_some_and(|b| elapsed_at_start + t > b);
+                    let reached = std::sync::Mutex::new(JobProgress::default());
+                    let stop = |t: Duration, p: &JobProgress| {
+                        if let Ok(mut r) = reached.lock() {
+                            *r = *p;
+                        }
+                        t > max || budget.is_some_and(|b| elapsed_at_start + t > b)
+                    };
                     let started = Instant::now();
                     let baked = baking::bake(&scene, options.settings()?, args.threads, &stop)?;
                     let Some(baked) = baked else {
                         let t = started.elapsed().as_secs_f64();
-                        let why = if t > args.max_seconds {
-                            format!("abandoned after {t:.0} s > --max-seconds")
+                        let p = reached.into_inner().unwrap_or_default();
+                        let (done, pending) = (p.current.points_done, p.current.points_pending);
+                        let rate = if p.pass + 1 == p.passes && done > 0 {
+                            format!(
+                                "; its current round alone would take about {:.0} min at this rate",
+                                t * (done + pending) as f64 / done as f64 / 60.0
+                            )
+                        } else {
+                            String::new()
+                        };
+                        let at = format!(
+                            "pass {}/{}, {done} points done, {pending} pending{rate}",
+                            p.pass + 1,
+                            p.passes,
+                        );
+                        let why = if t > spec.max_seconds {
+                            format!("abandoned after {t:.0} s ({at}) > the scene's cap")
                         } else {
                             format!(
-                                "abandoned after {t:.0} s: the sweep's --budget-seconds ran out"
+                                "abandoned after {t:.0} s ({at}): the scene's --budget-seconds ran out"
                             )
                         };
                         eprintln!(
@@ -496,7 +538,7 @@ pub fn run(args: ChartArgs) -> Result<()> {
     eprintln!(
         "chart: {} bakes in {:.0} s -> {}",
         rows.iter().filter(|r| r.measured.is_some()).count(),
-        sweep_start.elapsed().as_secs_f64(),
+        run_start.elapsed().as_secs_f64(),
         args.out.display()
     );
     Ok(())
@@ -504,14 +546,16 @@ pub fn run(args: ChartArgs) -> Result<()> {
 
 fn describe_settings(spec: &SceneSpec) -> String {
     let d = |x: Option<f32>| x.map_or("default".to_string(), |x| format!("{x}"));
+    let n = |x: Option<u32>| x.map_or("default".to_string(), |x| x.to_string());
     format!(
-        "irradiance-map density {} samples/m, lightmap {} texels/m, min samples {}, gathering pre-passes {}, sides {}",
+        "irradiance-map density {} samples/m, lightmap {} texels/m, samples per estimate {} to {}, gathering pre-passes {}, sides {}, each bake capped at {:.0} s",
         d(spec.irradiance_map_density),
         d(spec.lightmap_density),
-        spec.min_samples
-            .map_or("default".to_string(), |m| m.to_string()),
+        n(spec.min_samples),
+        n(spec.max_samples),
         spec.gather,
-        if spec.both_sides { "both" } else { "front" }
+        if spec.both_sides { "both" } else { "front" },
+        spec.max_seconds
     )
 }
 
