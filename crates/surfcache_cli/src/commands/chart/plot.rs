@@ -119,6 +119,22 @@ fn draw_panel(
                 .then_some((r, x, m.rel_rms))
         })
         .collect();
+    if measured.is_empty() {
+        let (w, h) = area.dim_in_pixel();
+        let style = ("sans-serif", 24).into_font().color(&BLACK);
+        area.draw_text(
+            &format!("{scene}: no bake finished within its cap"),
+            &style,
+            (40, h as i32 / 2 - 20),
+        )?;
+        area.draw_text(
+            "(see speed_accuracy.md)",
+            &("sans-serif", 18).into_font().color(&BLACK),
+            (40, h as i32 / 2 + 16),
+        )?;
+        let _ = w;
+        return Ok(());
+    }
     let xr = range(measured.iter().map(|m| m.1));
     let yr = range(measured.iter().map(|m| m.2));
     let (caption, x_desc) = match axis {
