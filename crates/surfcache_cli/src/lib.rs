@@ -6,6 +6,7 @@
 //! Errors print as one line on stderr with a non-zero exit status.
 
 mod bake_dir;
+mod baking;
 pub mod camera;
 mod commands;
 pub mod picture;

@@ -2,8 +2,29 @@
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
+use rayon::prelude::*;
 use std::{io::Write, path::Path};
-use surfcache_trace::Query;
+use surfcache_cache::SurfaceCache;
+use surfcache_trace::{Query, TracedScene};
+
+/// Baked irradiance at each query point: the point is located on `geometry` (the baked
+/// triangles, in the cache's order) and looked up in `cache` on the side whose geometric
+/// normal points along the query normal; `None` for a point off every surface.
+pub fn lookup_points<C: SurfaceCache>(
+    geometry: &TracedScene,
+    cache: &C,
+    queries: &[Query],
+) -> Vec<Option<Vec3>> {
+    queries
+        .par_iter()
+        .map(|q| {
+            let p = geometry.locate(q.position, q.normal)?;
+            let front =
+                geometry.geometric_normals[p.triangle as usize].dot(p.geometric_normal) > 0.0;
+            Some(cache.lookup(p.triangle, p.uv, front))
+        })
+        .collect()
+}
 
 /// Reads `x,y,z,nx,ny,nz` rows; rejects a wrong header, short rows and non-finite numbers.
 pub fn read_points(path: &Path) -> Result<Vec<Query>> {

@@ -10,7 +10,7 @@ use surfcache_ecs::{BakeConfig, SurfcachePlugin, TracedSceneResource, spawn_scen
 use surfcache_trace::TracedScene;
 
 /// Environment options (CONTRACT.md).
-#[derive(Args, Debug, Clone, Default)]
+#[derive(Args, Debug, Clone)]
 pub struct EnvArgs {
     /// Environment radiance map, equirectangular OpenEXR (W/(m²·sr), +Y up, centre = −Z).
     #[arg(long, value_name = "FILE.exr")]
@@ -21,6 +21,18 @@ pub struct EnvArgs {
     /// Scales the environment (--env or --env-color, or a built-in scene's sky).
     #[arg(long, value_name = "K", default_value_t = 1.0)]
     pub env_intensity: f32,
+}
+
+/// No options given: the scene's own environment at intensity 1 (what the command line's
+/// defaults mean).
+impl Default for EnvArgs {
+    fn default() -> Self {
+        Self {
+            env: None,
+            env_color: None,
+            env_intensity: 1.0,
+        }
+    }
 }
 
 fn parse_rgb(s: &str) -> Result<Vec3, String> {

@@ -3,10 +3,10 @@
 
 use crate::{
     bake_dir::{self, StagingDir},
+    baking::{self, BakeOptions, Baked, parse_method, parse_sampler},
     scene_args::{EnvArgs, LoadedWorld},
 };
-use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
+use anyhow::{Result, bail};
 use serde_json::json;
 use std::{
     path::PathBuf,
@@ -14,18 +14,12 @@ use std::{
         Arc,
         atomic::{AtomicBool, Ordering},
     },
-    time::Instant,
 };
 use surfcache_cache::{
-    CacheSettings, Method, SurfaceCache,
+    Method, SurfaceCache,
     archive::BakeArchive,
-    bake::{BakeSettings, DEFAULT_GATHER_PASSES, FLOOR_FRACTION},
+    bake::{DEFAULT_GATHER_PASSES, FLOOR_FRACTION},
 };
-use surfcache_ecs::{
-    BakeConfig, BakeStatus, BakeWaitError, PublishedLightmaps, SurfaceCacheResource,
-    SurfcachePlugin,
-};
-use surfcache_trace::{EstimatorSettings, Sampler};
 
 /// `surfcache bake` options (CONTRACT.md, plus the project's own).
 #[derive(clap::Args)]
@@ -83,52 +77,36 @@ pub struct BakeArgs {
 pub fn run(args: BakeArgs) -> Result<()> {
     let method = match &args.method {
         None => Method::default(),
-        Some(m) => Method::from_name(m).with_context(|| {
-            let known: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
-            format!("unknown method '{m}' (known: {})", known.join(", "))
-        })?,
+        Some(m) => parse_method(m)?,
     };
-    let Some(sampler) = Sampler::from_name(&args.sampler) else {
-        let known: Vec<&str> = Sampler::ALL.iter().map(|s| s.name()).collect();
-        bail!(
-            "unknown sampler '{}' (known: {})",
-            args.sampler,
-            known.join(", ")
-        );
-    };
-    if !(args.max_rel_error.is_finite() && args.max_rel_error > 0.0) {
-        bail!("--max-rel-error must be a positive number");
-    }
-    let defaults = EstimatorSettings::default();
-    let min_samples = args.min_samples.unwrap_or(defaults.min_samples);
-    let max_samples = args
-        .max_samples
-        .unwrap_or(defaults.max_samples.max(min_samples));
-    if min_samples == 0 || max_samples < min_samples {
-        bail!("need 1 ≤ --min-samples ≤ --max-samples (got {min_samples} and {max_samples})");
-    }
+    let sampler = parse_sampler(&args.sampler)?;
     let both_sides = match args.sides.as_str() {
         "both" => true,
         "front" => false,
         other => bail!("unknown --sides '{other}' (known: both, front)"),
     };
-    let mut cache_settings = CacheSettings::for_method(method);
-    cache_settings.set_both_sides(both_sides);
-    if let Some(d) = args.density {
-        if !(d.is_finite() && d > 0.0) {
-            bail!("--density must be a positive number");
-        }
-        cache_settings.set_density(d);
-    }
-    if let Some(e) = args.interpolation_error {
-        if !(e.is_finite() && e > 0.0) {
-            bail!("--interpolation-error must be a positive number");
-        }
-        cache_settings.set_interpolation_error(e);
-    }
+    let options = BakeOptions {
+        method,
+        sampler,
+        max_rel_error: args.max_rel_error,
+        min_samples: args.min_samples,
+        max_samples: args.max_samples,
+        bounces: args.bounces,
+        seed: args.seed,
+        density: args.density,
+        interpolation_error: args.interpolation_error,
+        gather: args.gather,
+        both_sides,
+    };
+    let settings = options.settings()?;
+    let (min_samples, max_samples) = (
+        settings.estimator.min_samples,
+        settings.estimator.max_samples,
+    );
     let staging = StagingDir::create(&args.out)?;
 
     let mut loaded = LoadedWorld::load(&args.scene, &args.env)?;
+    let scene = loaded.traced()?;
     let cancel = Arc::new(AtomicBool::new(false));
     {
         let cancel = cancel.clone();
@@ -137,93 +115,28 @@ pub fn run(args: BakeArgs) -> Result<()> {
         let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::SeqCst));
     }
     let threads = args.threads;
-    if threads == Some(0) {
-        bail!("--threads must be at least 1");
-    }
-    if args.gather > 4 {
-        bail!("--gather takes at most 4 pre-passes");
-    }
-    let settings = BakeSettings {
-        cache: cache_settings,
-        estimator: EstimatorSettings {
-            sampler,
-            max_rel_error: args.max_rel_error,
-            min_samples,
-            max_samples,
-            floor: 0.0,
-            max_bounces: args.bounces,
-        },
-        seed: args.seed,
-        gather_passes: args.gather,
-    };
-    // The bake is the ECS plugin's: turn baking on and run frames until it published.
-    let start = Instant::now();
-    loaded.world.insert_resource(BakeConfig {
+    let Some(Baked {
+        cache,
+        progress,
         settings,
-        enabled: true,
-        threads,
-        points_per_step: 1024,
-        ..Default::default()
-    });
-    let bar = ProgressBar::new(1000).with_style(
-        ProgressStyle::with_template("bake [{elapsed_precise}] {bar:30} {msg}")
-            .expect("static template"),
-    );
-    SurfcachePlugin::run_until_baked(
-        &mut loaded.world,
-        &mut loaded.schedule,
-        std::time::Duration::from_millis(20),
-        |world| {
-            let status = world.resource::<BakeStatus>();
-            bar.set_position((status.fraction * 1000.0) as u64);
-            bar.set_message(format!(
-                "{} samples, {:.1} Mrays/s{}",
-                status.samples,
-                status.rays_per_second / 1e6,
-                status
-                    .eta_seconds
-                    .map(|s| format!(", about {s:.0} s left"))
-                    .unwrap_or_default()
-            ));
-            !cancel.load(Ordering::SeqCst)
-        },
-    )
-    .map_err(|e| {
-        bar.finish_and_clear();
-        match e {
-            BakeWaitError::Stopped => anyhow::anyhow!(
-                "interrupted: nothing was written to '{}'",
-                args.out.display()
-            ),
-            BakeWaitError::Failed(e) => anyhow::anyhow!("bake failed: {e}"),
-        }
-    })?;
-    bar.finish_and_clear();
-    let baked = loaded.world.resource::<SurfaceCacheResource>().clone();
-    let (Some(outcome), Some(scene)) = (baked.outcome, baked.scene) else {
-        bail!("internal error: the bake did not finish");
+        seconds: bake_seconds,
+    }) = baking::bake(&mut loaded, settings, threads, &|_, _| {
+        cancel.load(Ordering::SeqCst)
+    })?
+    else {
+        bail!(
+            "interrupted: nothing was written to '{}'",
+            args.out.display()
+        );
     };
-    let progress = outcome.progress;
-    let settings = outcome.settings;
-    let cache = outcome.cache().clone();
-    // The textures the plugin published, in instance order, front before back.
-    let mut textures: Vec<_> = loaded
-        .world
-        .resource::<PublishedLightmaps>()
-        .by_entity
-        .values()
-        .flat_map(|l| l.front.iter().chain(l.back.iter()))
-        .map(|t| (**t).clone())
-        .collect();
-    textures.sort_by_key(|t| (t.instance, !t.front));
     let floor = settings.estimator.floor;
     let mean = floor / FLOOR_FRACTION;
-    let bake_seconds = start.elapsed().as_secs_f64();
     let stats = cache.stats();
 
     // Outputs: archive for `query`, textures, the scene with UV1, the report.
+    let textures = cache.publish(&scene);
     let lightmaps = bake_dir::write_lightmaps(&staging, &loaded, &scene, &textures)?;
-    let archive = BakeArchive::new(&scene, Arc::unwrap_or_clone(cache));
+    let archive = BakeArchive::new(&scene, cache);
     staging.write("cache.bin", &archive.to_bytes())?;
     let report = json!({
         "scene": loaded.name,
@@ -256,7 +169,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
             "max_samples": max_samples,
             "bounces": args.bounces,
             "seed": args.seed,
-            "threads": threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+            "threads": threads.unwrap_or_else(rayon::current_num_threads),
             "sampler": sampler.name(),
             "sides": args.sides,
             "gather": args.gather,

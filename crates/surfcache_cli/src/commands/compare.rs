@@ -34,6 +34,10 @@ pub struct Comparison {
     pub max_rel: f64,
     /// RMS of the reference's own relative standard error (its noise floor), when given.
     pub reference_rel_std: Option<f64>,
+    /// The reference's own standard error in the measure of `rel_rms` (each channel's
+    /// standard error over R + ε), RMS over points and channels, when given: what
+    /// `rel_rms` cannot fall below.
+    pub reference_noise: Option<f64>,
 }
 
 /// Compares `result` with `reference` row by row (module docs define the figures).
@@ -69,6 +73,7 @@ pub fn compare(
         .fold(0.0, f64::max);
     let eps = mean * 0.01;
     let (mut sq, mut num, mut den, mut std_sq, mut std_n) = (0.0, 0.0, 0.0, 0.0, 0usize);
+    let mut noise_sq = 0.0;
     for (e, r, s) in &pairs {
         let d = (*e - *r) / (r.max(glam::DVec3::ZERO) + eps).max(glam::DVec3::splat(1e-300));
         sq += d.length_squared();
@@ -78,11 +83,15 @@ pub fn compare(
         if let Some(s) = s.filter(|s| s.is_finite()) {
             std_sq += (s as f64) * (s as f64);
             std_n += 1;
+            let se = r.max(glam::DVec3::ZERO) * s as f64;
+            noise_sq += (se / (r.max(glam::DVec3::ZERO) + eps).max(glam::DVec3::splat(1e-300)))
+                .length_squared();
         }
     }
     out.rel_rms = (sq / (3 * n) as f64).sqrt();
     out.nrmse = if den > 0.0 { (num / den).sqrt() } else { 0.0 };
     out.reference_rel_std = (std_n > 0).then(|| (std_sq / std_n as f64).sqrt());
+    out.reference_noise = (std_n > 0).then(|| (noise_sq / (3 * std_n) as f64).sqrt());
     out
 }
 

@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 mod bake;
+mod chart;
 pub(crate) mod compare;
 mod export;
 mod points;
@@ -34,6 +35,11 @@ pub enum Command {
     Bake(bake::BakeArgs),
     /// Answers E(x, n) at query points from a finished bake, without re-baking.
     Query(query::QueryArgs),
+    /// Speed against accuracy: bakes every method × sampler over a sweep of error bounds
+    /// (Cornell box, and Sponza from the shared assets when present), measures time, bytes
+    /// and relative RMS error against a converged reference, and writes
+    /// speed_accuracy.csv, two log-log charts and a summary.
+    Chart(chart::ChartArgs),
     /// Renders a camera view shaded from a bake, path-traced, or as a diagnostic picture.
     Render(render::RenderArgs),
 }
@@ -49,5 +55,6 @@ pub fn run(command: Command) -> Result<()> {
         Command::Bake(args) => bake::run(args),
         Command::Query(args) => query::run(args),
         Command::Render(args) => render::run(args),
+        Command::Chart(args) => chart::run(args),
     }
 }

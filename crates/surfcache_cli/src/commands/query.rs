@@ -3,12 +3,10 @@
 
 use crate::{
     bake_dir::read_archive,
-    points::{read_points, write_results},
+    points::{lookup_points, read_points, write_results},
 };
 use anyhow::{Context, Result};
-use rayon::prelude::*;
 use std::path::PathBuf;
-use surfcache_cache::SurfaceCache;
 
 /// `surfcache query` options (CONTRACT.md).
 #[derive(clap::Args)]
@@ -29,16 +27,7 @@ pub fn run(args: QueryArgs) -> Result<()> {
     let geometry = archive
         .geometry()
         .with_context(|| format!("'{}'", args.out_dir.display()))?;
-    let cache = &archive.cache;
-    let values: Vec<Option<glam::Vec3>> = queries
-        .par_iter()
-        .map(|q| {
-            let p = geometry.locate(q.position, q.normal)?;
-            let front =
-                geometry.geometric_normals[p.triangle as usize].dot(p.geometric_normal) > 0.0;
-            Some(cache.lookup(p.triangle, p.uv, front))
-        })
-        .collect();
+    let values = lookup_points(&geometry, &archive.cache, &queries);
     let mut off_surface = 0;
     let rows: Vec<String> = queries
         .iter()

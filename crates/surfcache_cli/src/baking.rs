@@ -1,0 +1,175 @@
+//! The one bake code path of the command-line tool: options into [`BakeSettings`], and
+//! the ECS plugin's schedule run until it publishes the bake, with a progress line.
+//! `bake` and `chart` both use it.
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::time::{Duration, Instant};
+use surfcache_cache::{
+    Cache, CacheSettings, Method,
+    bake::{BakeSettings, JobProgress},
+};
+use surfcache_trace::{EstimatorSettings, Sampler};
+
+use crate::scene_args::LoadedWorld;
+use surfcache_ecs::{BakeConfig, BakeStatus, BakeWaitError, SurfaceCacheResource, SurfcachePlugin};
+
+/// Parses a method name, listing the known ones on error.
+pub fn parse_method(name: &str) -> Result<Method> {
+    Method::from_name(name).with_context(|| {
+        let known: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+        format!("unknown method '{name}' (known: {})", known.join(", "))
+    })
+}
+
+/// Parses a sampler name, listing the known ones on error.
+pub fn parse_sampler(name: &str) -> Result<Sampler> {
+    Sampler::from_name(name).with_context(|| {
+        let known: Vec<&str> = Sampler::ALL.iter().map(|s| s.name()).collect();
+        format!("unknown sampler '{name}' (known: {})", known.join(", "))
+    })
+}
+
+/// Every option of a bake besides the scene (see `surfcache bake --help`).
+#[derive(Clone, Debug)]
+pub struct BakeOptions {
+    pub method: Method,
+    pub sampler: Sampler,
+    pub max_rel_error: f32,
+    pub min_samples: Option<u32>,
+    pub max_samples: Option<u32>,
+    pub bounces: Option<u32>,
+    pub seed: u64,
+    /// Irradiance-map samples or lightmap texels per metre (the method's own if `None`).
+    pub density: Option<f32>,
+    pub interpolation_error: Option<f32>,
+    pub gather: u32,
+    pub both_sides: bool,
+}
+
+impl BakeOptions {
+    /// Checks the options and turns them into the settings of a [`BakeJob`].
+    pub fn settings(&self) -> Result<BakeSettings> {
+        if !(self.max_rel_error.is_finite() && self.max_rel_error > 0.0) {
+            bail!("--max-rel-error must be a positive number");
+        }
+        let defaults = EstimatorSettings::default();
+        let min_samples = self.min_samples.unwrap_or(defaults.min_samples);
+        let max_samples = self
+            .max_samples
+            .unwrap_or(defaults.max_samples.max(min_samples));
+        if min_samples == 0 || max_samples < min_samples {
+            bail!("need 1 ≤ --min-samples ≤ --max-samples (got {min_samples} and {max_samples})");
+        }
+        if self.gather > 4 {
+            bail!("--gather takes at most 4 pre-passes");
+        }
+        let mut cache = CacheSettings::for_method(self.method);
+        cache.set_both_sides(self.both_sides);
+        if let Some(d) = self.density {
+            if !(d.is_finite() && d > 0.0) {
+                bail!("--density must be a positive number");
+            }
+            cache.set_density(d);
+        }
+        if let Some(e) = self.interpolation_error {
+            if !(e.is_finite() && e > 0.0) {
+                bail!("--interpolation-error must be a positive number");
+            }
+            cache.set_interpolation_error(e);
+        }
+        Ok(BakeSettings {
+            cache,
+            estimator: EstimatorSettings {
+                sampler: self.sampler,
+                max_rel_error: self.max_rel_error,
+                min_samples,
+                max_samples,
+                floor: 0.0,
+                max_bounces: self.bounces,
+            },
+            seed: self.seed,
+            gather_passes: self.gather,
+        })
+    }
+}
+
+/// A finished bake: the final cache, the job's figures, the settings it used (floor
+/// filled in) and its wall-clock time.
+pub struct Baked {
+    pub cache: Cache,
+    pub progress: JobProgress,
+    pub settings: BakeSettings,
+    pub seconds: f64,
+}
+
+/// Bakes `settings` on the scene loaded in `loaded` through the ECS plugin (the one bake
+/// path: a [`BakeConfig`] goes into the world and frames run until the plugin publishes
+/// the bake), on a pool of `threads` workers, showing a progress line. `stop` is asked
+/// every frame with the time and progress so far; when it says so the bake is cancelled
+/// and `Ok(None)` returned.
+pub fn bake(
+    loaded: &mut LoadedWorld,
+    settings: BakeSettings,
+    threads: Option<usize>,
+    stop: &(dyn Fn(Duration, &JobProgress) -> bool + Sync),
+) -> Result<Option<Baked>> {
+    let start = Instant::now();
+    loaded.world.insert_resource(BakeConfig {
+        settings,
+        enabled: true,
+        threads,
+        points_per_step: 1024,
+        ..Default::default()
+    });
+    let bar = ProgressBar::new_spinner().with_style(
+        ProgressStyle::with_template("bake {spinner} {msg} [{elapsed_precise}]")
+            .expect("static template"),
+    );
+    let result = SurfcachePlugin::run_until_baked(
+        &mut loaded.world,
+        &mut loaded.schedule,
+        Duration::from_millis(10),
+        |world| {
+            let status = world.resource::<BakeStatus>();
+            let p = status.job;
+            if stop(start.elapsed(), &p) {
+                return false;
+            }
+            bar.set_message(format!(
+                "pass {}/{} round {}: {} points done, {} pending, {:.1} Mrays/s{}",
+                p.pass + 1,
+                p.passes.max(1),
+                p.current.rounds + 1,
+                p.current.points_done,
+                p.current.points_pending,
+                status.rays_per_second / 1e6,
+                status
+                    .eta_seconds
+                    .map(|s| format!(", about {s:.0} s left"))
+                    .unwrap_or_default()
+            ));
+            bar.tick();
+            true
+        },
+    );
+    bar.finish_and_clear();
+    match result {
+        Err(BakeWaitError::Stopped) => Ok(None),
+        Err(BakeWaitError::Failed(e)) => bail!("bake failed: {e}"),
+        Ok(done) => {
+            let outcome = loaded
+                .world
+                .resource::<SurfaceCacheResource>()
+                .outcome
+                .clone()
+                .context("internal error: the bake did not finish")?;
+            Ok(Some(Baked {
+                cache: (**outcome.cache()).clone(),
+                progress: outcome.progress,
+                settings: outcome.settings,
+                seconds: done.seconds,
+            }))
+        }
+    }
+}

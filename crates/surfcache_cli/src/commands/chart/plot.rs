@@ -1,0 +1,249 @@
+//! The two log-log charts of `surfcache chart`: relative RMS error against bake seconds
+//! and against cache bytes, one panel per scene, one curve per (method, sampler).
+
+use super::Row;
+use anyhow::{Context, Result, anyhow};
+use plotters::{
+    prelude::*,
+    style::{FontStyle, register_font},
+};
+use std::{path::Path, sync::Once};
+
+/// DejaVu Sans (assets/fonts/DejaVuSans.LICENSE): embedded so that text needs no system
+/// fonts.
+const FONT: &[u8] = include_bytes!("../../../../../assets/fonts/DejaVuSans.ttf");
+
+/// The horizontal axis of a chart.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum XAxis {
+    Seconds,
+    Bytes,
+}
+
+const PANEL: (u32, u32) = (900, 680);
+
+fn method_colour(method: &str) -> RGBColor {
+    match method {
+        "vertex" => RGBColor(31, 119, 180),
+        "irradiance-map" => RGBColor(214, 39, 40),
+        "lightmap" => RGBColor(44, 160, 44),
+        _ => RGBColor(90, 90, 90),
+    }
+}
+
+/// Lighter for the plainer samplers: uniform lightest, best full colour.
+fn sampler_colour(base: RGBColor, sampler: &str) -> RGBColor {
+    let t = match sampler {
+        "uniform" => 0.55,
+        "cosine" => 0.3,
+        "qmc" | "mis" => 0.15,
+        _ => 0.0,
+    };
+    let mix = |c: u8| (c as f64 + (255.0 - c as f64) * t).round() as u8;
+    RGBColor(mix(base.0), mix(base.1), mix(base.2))
+}
+
+/// Log-axis range holding `values`, widened to whole decades (so that every decade gets
+/// its labels).
+fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !lo.is_finite() {
+        return 0.1..10.0;
+    }
+    let lo = 10f64.powf((lo / 1.02).log10().floor());
+    let hi = 10f64.powf((hi * 1.02).log10().ceil());
+    lo..hi
+}
+
+/// Draws the chart of `rows` (measured points only) into a PNG at `path`.
+pub fn draw(path: &Path, rows: &[Row], axis: XAxis) -> Result<()> {
+    static FONTS: Once = Once::new();
+    FONTS.call_once(|| {
+        // The font is a valid TTF (a test draws with it).
+        let _ = register_font("sans-serif", FontStyle::Normal, FONT);
+    });
+    let mut scenes: Vec<&str> = Vec::new();
+    for r in rows {
+        if !scenes.contains(&r.scene.as_str()) {
+            scenes.push(&r.scene);
+        }
+    }
+    let panels = scenes.len().max(1) as u32;
+    let (w, h) = (PANEL.0 * panels, PANEL.1);
+    let mut buffer = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area();
+        let areas = root.split_evenly((1, panels as usize));
+        for (area, scene) in areas.iter().zip(&scenes) {
+            draw_panel(area, rows, scene, axis)
+                .map_err(|e| anyhow!("cannot draw the chart: {e}"))?;
+        }
+        root.present()
+            .map_err(|e| anyhow!("cannot draw the chart: {e}"))?;
+    }
+    let mut file = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut file, w, h);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().context("cannot encode PNG")?;
+        writer
+            .write_image_data(&buffer)
+            .context("cannot encode PNG")?;
+    }
+    Ok(surfcache_io::write_file_atomically(path, &file)?)
+}
+
+type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+
+fn draw_panel(
+    area: &Area<'_>,
+    rows: &[Row],
+    scene: &str,
+    axis: XAxis,
+) -> std::result::Result<(), Box<dyn std::error::Error>> {
+    let measured: Vec<(&Row, f64, f64)> = rows
+        .iter()
+        .filter(|r| r.scene == scene)
+        .filter_map(|r| {
+            let m = r.measured?;
+            let x = match axis {
+                XAxis::Seconds => r.seconds,
+                XAxis::Bytes => m.bytes as f64,
+            };
+            (x > 0.0 && m.rel_rms > 0.0 && x.is_finite() && m.rel_rms.is_finite())
+                .then_some((r, x, m.rel_rms))
+        })
+        .collect();
+    if measured.is_empty() {
+        let (w, h) = area.dim_in_pixel();
+        let style = ("sans-serif", 24).into_font().color(&BLACK);
+        area.draw_text(
+            &format!("{scene}: no bake finished within its cap"),
+            &style,
+            (40, h as i32 / 2 - 20),
+        )?;
+        area.draw_text(
+            "(see speed_accuracy.md)",
+            &("sans-serif", 18).into_font().color(&BLACK),
+            (40, h as i32 / 2 + 16),
+        )?;
+        let _ = w;
+        return Ok(());
+    }
+    let xr = range(measured.iter().map(|m| m.1));
+    let yr = range(measured.iter().map(|m| m.2));
+    let (caption, x_desc) = match axis {
+        XAxis::Seconds => (
+            format!("{scene}: error against bake time"),
+            "bake seconds (log)",
+        ),
+        XAxis::Bytes => (
+            format!("{scene}: error against cache size"),
+            "cache bytes (log)",
+        ),
+    };
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 26))
+        .margin(18)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d(xr.log_scale(), yr.log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc("relative RMS error (log)")
+        .x_labels(12)
+        .y_labels(16)
+        .label_style(("sans-serif", 15))
+        .axis_desc_style(("sans-serif", 17))
+        .x_label_formatter(&|v| format_number(*v))
+        .y_label_formatter(&|v| format!("{}%", format_number(v * 100.0)))
+        .draw()?;
+    let mut curves: Vec<(&str, &str)> = Vec::new();
+    for (r, _, _) in &measured {
+        if !curves.contains(&(r.method.as_str(), r.sampler.as_str())) {
+            curves.push((&r.method, &r.sampler));
+        }
+    }
+    for (method, sampler) in curves {
+        let mut points: Vec<(f32, f64, f64)> = measured
+            .iter()
+            .filter(|(r, _, _)| r.method == method && r.sampler == sampler)
+            .map(|(r, x, y)| (r.bound, *x, *y))
+            .collect();
+        points.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let colour = sampler_colour(method_colour(method), sampler);
+        let width = if sampler == "best" { 3 } else { 2 };
+        let line = colour.stroke_width(width);
+        let sampler_name = sampler.to_string();
+        chart
+            .draw_series(LineSeries::new(points.iter().map(|p| (p.1, p.2)), line))?
+            .label(format!("{method} / {sampler}"))
+            .legend(move |(x, y)| {
+                EmptyElement::at((x, y))
+                    + PathElement::new(vec![(-8, 0), (12, 0)], colour.stroke_width(width))
+                    + match sampler_name.as_str() {
+                        "uniform" => Circle::new((2, 0), 4, colour.filled()).into_dyn(),
+                        "cosine" => TriangleMarker::new((2, 0), 5, colour.filled()).into_dyn(),
+                        _ => Rectangle::new([(-2, -4), (6, 4)], colour.filled()).into_dyn(),
+                    }
+            });
+        let at = points.iter().map(|p| (p.1, p.2));
+        let style = colour.filled();
+        match sampler {
+            "uniform" => {
+                chart
+                    .draw_series(at.map(|c| EmptyElement::at(c) + Circle::new((0, 0), 5, style)))?;
+            }
+            "cosine" => {
+                chart.draw_series(
+                    at.map(|c| EmptyElement::at(c) + TriangleMarker::new((0, 0), 6, style)),
+                )?;
+            }
+            _ => {
+                chart.draw_series(
+                    at.map(|c| EmptyElement::at(c) + Rectangle::new([(-4, -4), (4, 4)], style)),
+                )?;
+            }
+        }
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.4))
+        .label_font(("sans-serif", 15))
+        .draw()?;
+    Ok(())
+}
+
+/// 0.5, 2, 30, 1.2k, 4M: short labels for log axes.
+fn format_number(v: f64) -> String {
+    let (v, suffix) = if v >= 1e9 {
+        (v / 1e9, "G")
+    } else if v >= 1e6 {
+        (v / 1e6, "M")
+    } else if v >= 1e3 {
+        (v / 1e3, "k")
+    } else {
+        (v, "")
+    };
+    let s = if v >= 10.0 {
+        format!("{v:.0}")
+    } else if v >= 1.0 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.2}")
+    };
+    let s = if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    };
+    format!("{s}{suffix}")
+}
