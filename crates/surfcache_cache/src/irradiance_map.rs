@@ -16,6 +16,12 @@
 //! ([`IrradianceMapSettings::max_order_for`]). Doubling keeps every sample ((i, j) of
 //! order n is (2i, 2j) of order 2n); only the new ones are estimated.
 //!
+//! **Shadow probes.** A hard shadow narrower than the coarse sample spacing can fall
+//! between all of a grid's samples (the thesis' misjudged triangle), where no comparison
+//! of samples sees it. Grids that a punctual light's shadow boundary crosses — found by
+//! one shadow ray per light at each point of the maximum-order grid,
+//! [`punctual_shadow_edges`] — therefore refine to their maximum order.
+//!
 //! **Noise rule.** Estimates are noisy, and a plain test would keep refining noise. Only
 //! the part of a difference that exceeds `k` combined standard errors counts:
 //! `e = max_c max(0, |ΔE_c| − k·σ_c) / (E_new,c + ε)` with
@@ -302,11 +308,63 @@ struct Working {
     burial: Vec<u8>,
     /// Order (log2) of each grid slot's first round; empty: order 2 everywhere.
     start_log2: Vec<u8>,
+    /// Grid slots whose punctual lights' shadow boundary crosses them
+    /// ([`punctual_shadow_edges`]): they refine to their maximum order.
+    shadow_edges: Vec<bool>,
     /// Re-bakes: values of the maps before an edit, grid by grid, for the first round
     /// ([`SamplePoint::prior`]); `prior_offsets[g]` is grid slot g's first, or
     /// `u32::MAX` for a grid without one.
     priors: Vec<Vec3>,
     prior_offsets: Vec<u32>,
+}
+
+/// Grid slots (`2·triangle + side`, among those `bake` marks) that a hard shadow of a
+/// punctual light crosses: the light's exact irradiance (one shadow ray per light) at the
+/// points of the grid at its maximum order `max_orders[t]` is zero at some and positive
+/// at others. Such a grid refines to its maximum order whatever its samples say: a
+/// shadow strip narrower than the coarse sample spacing can fall between all of them
+/// (the thesis' misjudged triangle), and no comparison of samples can see it. Costs one
+/// shadow ray per light and probe point; none without punctual lights. Shadows of area
+/// lights and of a bright sky are left to the refinement test.
+pub fn punctual_shadow_edges(scene: &TracedScene, max_orders: &[u32], bake: &[bool]) -> Vec<bool> {
+    use rayon::prelude::*;
+    if scene.lights.is_empty() {
+        return vec![false; bake.len()];
+    }
+    (0..bake.len())
+        .into_par_iter()
+        .map(|g| {
+            if !bake[g] {
+                return false;
+            }
+            let (t, front) = ((g / 2) as u32, g % 2 == 0);
+            let n = max_orders[t as usize];
+            let inv = 1.0 / n as f32;
+            let (mut lit, mut dark) = (false, false);
+            let mut rays = 0;
+            for d in 0..=n {
+                for j in 0..=d {
+                    let i = d - j;
+                    let site = SampleSite::Surface {
+                        triangle: t,
+                        uv: Vec2::new(i as f32 * inv, j as f32 * inv),
+                        front,
+                    };
+                    let (p, origin) = crate::bake::sample_frame(scene, &site);
+                    let e = scene.punctual_irradiance_from(&p, origin, &mut rays);
+                    if e.max_element() > 0.0 {
+                        lit = true;
+                    } else {
+                        dark = true;
+                    }
+                    if lit && dark {
+                        return true;
+                    }
+                }
+            }
+            false
+        })
+        .collect()
 }
 
 /// Per-triangle adaptive irradiance maps (module docs).
@@ -335,7 +393,7 @@ impl IrradianceMaps {
     /// for, will start at order 2.
     pub fn new(scene: &TracedScene, settings: IrradianceMapSettings) -> Self {
         let triangles = scene.triangle_count();
-        let max_orders = scene
+        let max_orders: Vec<u32> = scene
             .positions
             .iter()
             .map(|[a, b, c]| {
@@ -346,11 +404,12 @@ impl IrradianceMaps {
                 settings.max_order_for(longest)
             })
             .collect();
-        let refine = (0..2 * triangles)
+        let refine: Vec<bool> = (0..2 * triangles)
             .map(|g| {
                 g % 2 == 0 || settings.both_sides || scene.material_of((g / 2) as u32).double_sided
             })
             .collect();
+        let shadow_edges = punctual_shadow_edges(scene, &max_orders, &refine);
         Self {
             settings,
             log2_orders: vec![0; 2 * triangles],
@@ -363,6 +422,7 @@ impl IrradianceMaps {
             working: Some(Box::new(Working {
                 max_orders,
                 refine,
+                shadow_edges,
                 ..Default::default()
             })),
         }
@@ -647,7 +707,9 @@ impl SurfaceCache for IrradianceMaps {
                 let base = self.offsets[g as usize] as usize;
                 let burial = &w.burial[base..base + grid_size(n)];
                 let mixed = burial.contains(&VALID) && burial.iter().any(|&b| b != VALID);
-                w.refine[g as usize] = mixed || self.interpolation_error(&w, base, n) > bound;
+                let shadow = w.shadow_edges.get(g as usize).copied().unwrap_or(false);
+                w.refine[g as usize] =
+                    mixed || shadow || self.interpolation_error(&w, base, n) > bound;
             }
         }
         w.pending.clear();
