@@ -6,13 +6,16 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::time::{Duration, Instant};
 use surfcache_cache::{
-    Cache, CacheSettings, Method,
+    Cache, CacheSettings, IrradianceTexture, Method,
     bake::{BakeSettings, JobProgress},
 };
 use surfcache_trace::{EstimatorSettings, Sampler};
 
 use crate::scene_args::LoadedWorld;
-use surfcache_ecs::{BakeConfig, BakeStatus, BakeWaitError, SurfaceCacheResource, SurfcachePlugin};
+use surfcache_ecs::{
+    BakeConfig, BakeStatus, BakeWaitError, PublishedLightmaps, SurfaceCacheResource,
+    SurfcachePlugin,
+};
 
 /// Parses a method name, listing the known ones on error.
 pub fn parse_method(name: &str) -> Result<Method> {
@@ -98,6 +101,8 @@ impl BakeOptions {
 /// filled in) and its wall-clock time.
 pub struct Baked {
     pub cache: Cache,
+    /// The textures the plugin published, in instance order, front side first.
+    pub textures: Vec<IrradianceTexture>,
     pub progress: JobProgress,
     pub settings: BakeSettings,
     pub seconds: f64,
@@ -164,8 +169,18 @@ pub fn bake(
                 .outcome
                 .clone()
                 .context("internal error: the bake did not finish")?;
+            let mut textures: Vec<IrradianceTexture> = loaded
+                .world
+                .resource::<PublishedLightmaps>()
+                .by_entity
+                .values()
+                .flat_map(|l| l.front.iter().chain(l.back.iter()))
+                .map(|t| (**t).clone())
+                .collect();
+            textures.sort_by_key(|t| (t.instance, !t.front));
             Ok(Some(Baked {
                 cache: (**outcome.cache()).clone(),
+                textures,
                 progress: outcome.progress,
                 settings: outcome.settings,
                 seconds: done.seconds,

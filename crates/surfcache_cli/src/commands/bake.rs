@@ -117,6 +117,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
     let threads = args.threads;
     let Some(Baked {
         cache,
+        textures,
         progress,
         settings,
         seconds: bake_seconds,
@@ -134,7 +135,6 @@ pub fn run(args: BakeArgs) -> Result<()> {
     let stats = cache.stats();
 
     // Outputs: archive for `query`, textures, the scene with UV1, the report.
-    let textures = cache.publish(&scene);
     let lightmaps = bake_dir::write_lightmaps(&staging, &loaded, &scene, &textures)?;
     let archive = BakeArchive::new(&scene, cache);
     staging.write("cache.bin", &archive.to_bytes())?;
