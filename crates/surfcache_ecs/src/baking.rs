@@ -24,9 +24,11 @@
 //! and the bake run on background threads (the bake on a rayon pool of
 //! [`BakeConfig::threads`]); the systems only start work, poll channels and swap finished
 //! results in, in time independent of the scene's size except for the O(instances)
-//! snapshot. [`BakeMode::Foreground`] instead estimates points on the calling thread for
-//! at most a time budget per update (for platforms without threads, and to show that
-//! results do not depend on pacing).
+//! snapshot. [`BakeMode::Foreground`] instead estimates the bake's points on the thread
+//! running the schedule, in steps of [`BakeConfig::points_per_step`] until the update's
+//! time budget is spent (a step started before the budget ran out finishes, so keep
+//! steps small); the BVH build stays in the background. It serves tests and tools that
+//! want the bake in their own thread, and shows that results do not depend on pacing.
 //!
 //! **Determinism.** Every sample's random stream is keyed by its position and the seed,
 //! never by frame or step, so a bake's result depends only on the scene, the settings and
