@@ -14,6 +14,7 @@
 //! cargo run --release --example incremental_edit [-- --method lightmap|irradiance-map|vertex]
 //!     [--noise-floor]   # also bake the edited scene with another seed: the metric's noise
 //!     [--scene cornell|sponza] [--density D] [--max-rel-error B] [--gather N]
+//!     [--min-samples N] [--max-samples N]
 //! ```
 //!
 //! The last line of output is
@@ -206,6 +207,12 @@ fn main() {
     }
     if let Some(b) = arg(&args, "--max-rel-error") {
         settings.estimator.max_rel_error = b.parse().expect("--max-rel-error B");
+    }
+    if let Some(n) = arg(&args, "--min-samples") {
+        settings.estimator.min_samples = n.parse().expect("--min-samples N");
+    }
+    if let Some(n) = arg(&args, "--max-samples") {
+        settings.estimator.max_samples = n.parse().expect("--max-samples N");
     }
     if let Some(g) = arg(&args, "--gather") {
         settings.gather_passes = g.parse().expect("--gather N");
