@@ -412,6 +412,45 @@ pub struct JobProgress {
     pub finished: bool,
 }
 
+impl JobProgress {
+    /// These figures of finished passes together with pass `pass` running in `baker`.
+    pub(crate) fn with_running<C: SurfaceCache>(
+        mut self,
+        pass: u32,
+        baker: Option<&Baker<C>>,
+    ) -> Self {
+        if let Some(b) = baker {
+            self.pass = pass;
+            self.current = *b.progress();
+            self.samples += self.current.samples;
+            self.rays += self.current.rays;
+        }
+        self
+    }
+}
+
+/// Steps pass `pass` of a multi-pass job, running in `baker`, by up to `max_points`
+/// points; once it finishes, takes it out of `baker`, adds its figures to `done` and
+/// returns its cache.
+pub(crate) fn step_pass<C: SurfaceCache>(
+    baker: &mut Option<Baker<C>>,
+    scene: &TracedScene,
+    max_points: usize,
+    pass: u32,
+    done: &mut JobProgress,
+) -> Option<C> {
+    if !baker.as_mut()?.step(scene, max_points) {
+        return None;
+    }
+    let b = baker.take()?;
+    let p = *b.progress();
+    done.samples += p.samples;
+    done.rays += p.rays;
+    done.pass = pass;
+    done.current = p;
+    Some(b.into_cache())
+}
+
 /// The caches of every pass of a finished bake (pre-passes first, the final cache last)
 /// and the settings it used (floor filled in): what an incremental re-bake starts from.
 #[derive(Clone)]
@@ -518,21 +557,16 @@ impl BakeJob {
         if self.baker.is_none() {
             self.start_pass(scene);
         }
-        let Some(baker) = self.baker.as_mut() else {
+        let Some(cache) = step_pass(
+            &mut self.baker,
+            scene,
+            max_points,
+            self.pass,
+            &mut self.done,
+        ) else {
             return false;
         };
-        if !baker.step(scene, max_points) {
-            return false;
-        }
-        let Some(baker) = self.baker.take() else {
-            return false;
-        };
-        let p = *baker.progress();
-        self.done.samples += p.samples;
-        self.done.rays += p.rays;
-        self.done.pass = self.pass;
-        self.done.current = p;
-        self.passes.push(Arc::new(baker.into_cache()));
+        self.passes.push(Arc::new(cache));
         if self.pass == self.settings.gather_passes {
             self.done.finished = true;
             return true;
@@ -543,14 +577,7 @@ impl BakeJob {
 
     /// Progress so far.
     pub fn progress(&self) -> JobProgress {
-        let mut p = self.done;
-        if let Some(b) = &self.baker {
-            p.pass = self.pass;
-            p.current = *b.progress();
-            p.samples += p.current.samples;
-            p.rays += p.current.rays;
-        }
-        p
+        self.done.with_running(self.pass, self.baker.as_ref())
     }
 
     /// Every pass's cache and the settings, once [`Self::step`] returned true.

@@ -37,7 +37,7 @@
 
 use crate::{
     Cache, SurfaceCache, UNMAPPED,
-    bake::{BakeOutcome, Baker, JobProgress, Previous},
+    bake::{BakeOutcome, Baker, JobProgress, Previous, step_pass},
 };
 use glam::{Vec2, Vec3};
 use std::sync::Arc;
@@ -176,21 +176,16 @@ impl IncrementalJob {
         if self.baker.is_none() {
             self.start_stage(scene);
         }
-        let Some(baker) = self.baker.as_mut() else {
+        let Some(cache) = step_pass(
+            &mut self.baker,
+            scene,
+            max_points,
+            self.stage,
+            &mut self.done,
+        ) else {
             return false;
         };
-        if !baker.step(scene, max_points) {
-            return false;
-        }
-        let Some(baker) = self.baker.take() else {
-            return false;
-        };
-        let p = *baker.progress();
-        self.done.samples += p.samples;
-        self.done.rays += p.rays;
-        self.done.pass = self.stage;
-        self.done.current = p;
-        let cache = Arc::new(baker.into_cache());
+        let cache = Arc::new(cache);
         if self.stage < INDIRECT_STAGES {
             self.stages.push(cache);
             self.stage += 1;
@@ -208,14 +203,7 @@ impl IncrementalJob {
 
     /// Progress so far (stage 0: direct change, later stages: indirect change).
     pub fn progress(&self) -> JobProgress {
-        let mut p = self.done;
-        if let Some(b) = &self.baker {
-            p.pass = self.stage;
-            p.current = *b.progress();
-            p.samples += p.current.samples;
-            p.rays += p.current.rays;
-        }
-        p
+        self.done.with_running(self.stage, self.baker.as_ref())
     }
 
     /// The re-baked cache as a one-pass outcome (the gathering pre-passes of the bake
