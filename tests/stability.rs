@@ -27,7 +27,7 @@ use surfcache::core::{
     environment::uv_to_direction,
     geometry::orthonormal_basis,
     glam::{Affine3A, Vec2, Vec3},
-    scenes::{append, cuboid, quad},
+    scenes::{append, cuboid, quad, square},
 };
 use surfcache::trace::{
     Estimate, EstimatorSettings, Query, Sampler, TracedScene, estimate, reference_irradiance,
@@ -670,16 +670,7 @@ fn dark_niche_black_blotches_and_how_gathering_removes_them() {
 fn floor_around_a_sunken_box(thresholds: [f32; 2]) -> [([f32; 2], [u64; 2]); 2] {
     let v = Vec3::new;
     let (lo, hi) = (v(-0.31, -0.2, -0.26), v(0.29, 0.2, 0.34));
-    let floor = quad(
-        "floor",
-        [
-            v(-0.6, 0., -0.6),
-            v(0.6, 0., -0.6),
-            v(0.6, 0., 0.6),
-            v(-0.6, 0., 0.6),
-        ],
-        Vec3::Y,
-    );
+    let floor = square("floor", 0.6, 0.0, Vec3::Y);
     let scene = traced(
         vec![
             instance(floor, grey(0.5)),

@@ -4,6 +4,7 @@
 use crate::{
     Cache, CacheSettings, IrradianceMapSettings, Method, SamplePoint, SampleSite, SurfaceCache,
     UNMAPPED,
+    incremental::{ChangePlan, INDIRECT_SKIP_SHARE},
 };
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -15,7 +16,7 @@ use surfcache_core::{
 };
 use surfcache_trace::{
     Estimate, EstimatorSettings, IrradianceLookup, PointInScene, Sampler, SurfacePoint,
-    TracedScene, estimate, estimate_change,
+    TracedScene, estimate, estimate_change, unchanged,
 };
 
 /// The relative-error floor ε is this fraction of the scene's mean irradiance (defined by
@@ -119,6 +120,10 @@ pub struct Previous {
     /// A sphere (centre, radius) holding every surface the edit changed: changes are then
     /// integrated over the cone of directions towards it only.
     pub focus: Option<(Vec3, f32)>,
+    /// A bound on the change (indirect stages of a re-bake): points it proves unchanged
+    /// keep their value, the others integrate over the cone it gives
+    /// ([`crate::incremental::ChangeBound::plan`]).
+    pub bound: Option<Arc<crate::incremental::ChangeBound>>,
 }
 
 /// Estimates E at one sample point of a cache (with final gathering from `gather` when
@@ -269,9 +274,22 @@ impl<C: SurfaceCache> Baker<C> {
                             origin: old_origin,
                             gather: prev.gather.as_deref().map(|g| g as &dyn IrradianceLookup),
                         };
-                        let focus = prev
-                            .focus
-                            .map(|(c, r)| Cone::towards_sphere(new_origin, c, r));
+                        let focus = match &prev.bound {
+                            Some(bound) => {
+                                let allowance = INDIRECT_SKIP_SHARE
+                                    * settings.max_rel_error
+                                    * (prior.min_element().max(0.0) + settings.floor);
+                                match bound.plan(new_origin, new_point.geometric_normal, allowance)
+                                {
+                                    ChangePlan::Unchanged => return unchanged(prior, settings),
+                                    ChangePlan::Cone(cone) => Some(cone),
+                                    ChangePlan::Hemisphere => None,
+                                }
+                            }
+                            None => prev
+                                .focus
+                                .map(|(c, r)| Cone::towards_sphere(new_origin, c, r)),
+                        };
                         estimate_change(&old, &new, prior, settings, seed, p.key, focus.as_ref())
                     }
                     None => estimate_point(scene, p, settings, seed, gather),
@@ -429,6 +447,11 @@ impl JobProgress {
     }
 }
 
+/// Set (to anything) in the environment, every finished pass of a [`BakeJob`] or an
+/// incremental re-bake prints one line to stderr: its points, samples, rays and rounds
+/// (where a bake's time goes; docs/results.md uses it).
+pub const TRACE_PASSES_VAR: &str = "SURFCACHE_TRACE_PASSES";
+
 /// Steps pass `pass` of a multi-pass job, running in `baker`, by up to `max_points`
 /// points; once it finishes, takes it out of `baker`, adds its figures to `done` and
 /// returns its cache.
@@ -444,6 +467,12 @@ pub(crate) fn step_pass<C: SurfaceCache>(
     }
     let b = baker.take()?;
     let p = *b.progress();
+    if std::env::var_os(TRACE_PASSES_VAR).is_some() {
+        eprintln!(
+            "[pass {pass}] points {} samples {} rays {} rounds {}",
+            p.points_done, p.samples, p.rays, p.rounds
+        );
+    }
     done.samples += p.samples;
     done.rays += p.rays;
     done.pass = pass;

@@ -26,13 +26,22 @@
 //!    stage left 4 % relative RMS against a fresh bake, three leave 1.6 %, at a noise
 //!    floor of 1.2 % between two fresh bakes with different seeds).
 //!
+//!    Each indirect stage first bounds its integrand from every stored sample of both
+//!    caches ([`triangle_changes`]: the largest change anywhere on each triangle),
+//!    binned into [`ChangeBound`]'s cells, each a bounding sphere with the largest
+//!    `ΔL = ρ/π · ΔE` of its triangles. A point whose bound `Σ ΔL_c ∫_cone cos dω` is
+//!    within [`INDIRECT_SKIP_SHARE`] of its error bound keeps its value without a ray;
+//!    the others integrate over the cone towards the cells that carry the rest. Far from
+//!    a small edit (a vase moved in a large hall) most points are skipped this way.
+//!
 //! Points where estimating the change is dearer than estimating E afresh (a shadow moved
 //! onto them) are estimated afresh ([`surfcache_trace::estimate_change`]).
 //!
 //! Left out: changes that reach a sample over more bounces off the edited region than
-//! the stages carry, i.e. `ρ/π ∫ (E_new − E_last)(y)`; and the noise of the change
-//! estimates, bounded by [`surfcache_trace::irradiance::CHANGE_ERROR_SHARE`] of the
-//! error bound each. Refinement (irradiance maps) continues as in a full bake where the
+//! the stages carry, i.e. `ρ/π ∫ (E_new − E_last)(y)`; per indirect stage and point at
+//! most [`INDIRECT_SKIP_SHARE`] × the stage's bound × (E + ε), proven by
+//! [`ChangeBound`]; and the noise of the change estimates, bounded by
+//! [`surfcache_trace::irradiance::CHANGE_ERROR_SHARE`] of the error bound each. Refinement (irradiance maps) continues as in a full bake where the
 //! updated values call for it.
 
 use crate::{
@@ -40,8 +49,9 @@ use crate::{
     bake::{BakeOutcome, Baker, JobProgress, Previous, step_pass},
 };
 use glam::{Vec2, Vec3};
-use std::sync::Arc;
-use surfcache_core::sampling::splitmix64;
+use rayon::prelude::*;
+use std::{f32::consts::PI, sync::Arc};
+use surfcache_core::sampling::{Cone, splitmix64};
 use surfcache_trace::{EstimatorSettings, IrradianceLookup, TracedScene};
 
 /// Indirect-change stages after the direct one: each propagates the previous stage's
@@ -50,6 +60,15 @@ pub const INDIRECT_STAGES: u32 = 3;
 
 /// The error bound of the indirect stages relative to the bake's.
 pub const INDIRECT_ERROR_FACTOR: f32 = 2.0;
+
+/// The share of a point's error bound (`bound · (E + ε)`, E's dimmest channel) that an
+/// indirect stage may leave out there: where [`ChangeBound`] proves the stage's change
+/// smaller, the point keeps its value; otherwise the change is integrated over the cone
+/// towards the cells that carry all but this much of it.
+pub const INDIRECT_SKIP_SHARE: f32 = 0.25;
+
+/// Cells per axis of [`ChangeBound`]'s grid.
+pub const CHANGE_CELLS: usize = 8;
 
 /// What an edit changed, in the terms a re-bake needs.
 #[derive(Clone, Debug)]
@@ -135,6 +154,7 @@ impl IncrementalJob {
                     triangle_map: self.edit.triangle_map.clone(),
                     gather: Some(self.before.cache().clone()),
                     focus: Some(sphere),
+                    bound: None,
                 })
         } else {
             let k = self.stage as usize;
@@ -151,6 +171,13 @@ impl IncrementalJob {
                 max_rel_error: settings.estimator.max_rel_error * INDIRECT_ERROR_FACTOR,
                 ..settings.estimator
             };
+            // What the stage integrates, ρ/π·(E_k − E_{k−1}) at first hits, bounded from
+            // every stored sample of both caches.
+            let changes = match k {
+                1 => triangle_changes(&latest, self.before.cache(), &self.edit.triangle_map),
+                _ => triangle_changes(&latest, &self.stages[k - 2], &identity),
+            };
+            let bound = ChangeBound::new(scene, &changes);
             Baker::new(
                 cache,
                 estimator,
@@ -162,6 +189,7 @@ impl IncrementalJob {
                 triangle_map: identity,
                 gather: Some(before),
                 focus: None,
+                bound: Some(Arc::new(bound)),
             })
         };
         self.baker = Some(baker);
@@ -216,4 +244,212 @@ impl IncrementalJob {
             progress: self.done,
         })
     }
+}
+
+/// Per triangle of `after`'s scene: the largest change, in any channel and on either
+/// side, between lookups of `after` on it and of `before` on `triangle_map[t]`
+/// (zero where the triangle did not exist before), anywhere on the triangle. Exact for
+/// vertex lighting and irradiance maps (both interpolate linearly between grid nodes, so
+/// the difference peaks at the nodes of the finer grid) and an upper bound for lightmaps
+/// (the texels a lookup can read).
+pub fn triangle_changes(after: &Cache, before: &Cache, triangle_map: &[u32]) -> Vec<f32> {
+    if let (Cache::Lightmap(a), Cache::Lightmap(b)) = (after, before) {
+        return a.triangle_changes(b, triangle_map);
+    }
+    let order = |cache: &Cache, t: u32, front: bool| match cache {
+        Cache::IrradianceMap(m) => m.order(t, front),
+        _ => 1,
+    };
+    (0..triangle_map.len() as u32)
+        .into_par_iter()
+        .map(|t| {
+            let t_old = triangle_map[t as usize];
+            let mut change = 0.0f32;
+            for front in [true, false] {
+                let n_old = match t_old {
+                    UNMAPPED => 0,
+                    _ => order(before, t_old, front),
+                };
+                let n = order(after, t, front).max(n_old).max(1);
+                for i in 0..=n {
+                    for j in 0..=n - i {
+                        let uv = Vec2::new(i as f32, j as f32) / n as f32;
+                        let old = match t_old {
+                            UNMAPPED => Vec3::ZERO,
+                            _ => before.lookup(t_old, uv, front),
+                        };
+                        let d = after.lookup(t, uv, front) - old;
+                        // An unbaked side (NaN lookups) may hold anything.
+                        change = change.max(if d.is_finite() {
+                            d.abs().max_element()
+                        } else {
+                            f32::INFINITY
+                        });
+                    }
+                }
+            }
+            change
+        })
+        .collect()
+}
+
+/// A bound on the change an indirect stage integrates, `ΔL(y) = ρ(y)/π · ΔE(y)` at first
+/// hits y: the changed triangles binned into a uniform grid of [`CHANGE_CELLS`]³ cells
+/// over their bounds, each cell with a bounding sphere and the largest ΔL of its
+/// triangles (ρ: the material's albedo factor; textures only scale it down).
+pub struct ChangeBound {
+    /// Per non-empty cell: bounding sphere (centre, radius), the largest ΔL of its
+    /// triangles, and Σ ΔL_t · area_t over them.
+    cells: Vec<ChangeCell>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct ChangeCell {
+    centre: Vec3,
+    radius: f32,
+    radiance: f32,
+    flux: f32,
+}
+
+impl ChangeCell {
+    /// A bound on `∫ |ΔL| cos θ dω` over the cell's triangles seen from `origin` above
+    /// the plane of `normal`: with `c` the largest cos θ in the cone towards the cell's
+    /// sphere, the cell's largest ΔL times `min(Ω · c, π)` ([`cone_cosine_bound`]), or,
+    /// from outside the sphere, `c · Σ ΔL_t · Ω_t` with each triangle's solid angle
+    /// `Ω_t ≤ area_t / d²`, d the distance to the sphere.
+    fn bound(&self, origin: Vec3, normal: Vec3) -> f32 {
+        let cone = Cone::towards_sphere(origin, self.centre, self.radius);
+        let (weight, cos_max) = cone_cosine_bound(&cone, normal);
+        let sphere = self.radiance * weight;
+        let d = origin.distance(self.centre) - self.radius;
+        if d > 0.0 && sphere > 0.0 {
+            sphere.min(cos_max * self.flux / (d * d))
+        } else {
+            sphere
+        }
+    }
+}
+
+/// What a point of an indirect stage needs ([`ChangeBound::plan`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ChangePlan {
+    /// The change is proven below the allowance: keep the value.
+    Unchanged,
+    /// Integrate over this cone only (what lies outside is below the allowance).
+    Cone(Cone),
+    /// Integrate over the whole hemisphere.
+    Hemisphere,
+}
+
+impl ChangeBound {
+    /// The bound for per-triangle changes of irradiance `changes` ([`triangle_changes`]).
+    pub fn new(scene: &TracedScene, changes: &[f32]) -> Self {
+        let changed: Vec<u32> = (0..changes.len() as u32)
+            .filter(|&t| changes[t as usize] > 0.0)
+            .collect();
+        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+        for &t in &changed {
+            for p in scene.positions[t as usize] {
+                (lo, hi) = (lo.min(p), hi.max(p));
+            }
+        }
+        let n = CHANGE_CELLS;
+        let extent = (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
+        let mut boxes =
+            vec![(Vec3::splat(f32::MAX), Vec3::splat(f32::MIN), 0.0f32, 0.0f32); n * n * n];
+        for &t in &changed {
+            let [a, b, c] = scene.positions[t as usize];
+            let centroid = (a + b + c) / 3.0;
+            let cell = ((centroid - lo) / extent * n as f32)
+                .as_uvec3()
+                .min(glam::UVec3::splat(n as u32 - 1));
+            let (blo, bhi, l, flux) =
+                &mut boxes[(cell.z as usize * n + cell.y as usize) * n + cell.x as usize];
+            *blo = blo.min(a.min(b).min(c));
+            *bhi = bhi.max(a.max(b).max(c));
+            let albedo = scene.material_of(t).albedo.max_element().max(0.0);
+            let radiance = albedo / PI * changes[t as usize];
+            *l = l.max(radiance);
+            *flux += radiance * surfcache_core::geometry::triangle_area(a, b, c);
+        }
+        let pad = scene.spawn_offset();
+        let cells = boxes
+            .into_iter()
+            .filter(|&(_, _, l, _)| l > 0.0)
+            .map(|(blo, bhi, radiance, flux)| ChangeCell {
+                centre: 0.5 * (blo + bhi),
+                radius: 0.5 * (bhi - blo).length() + pad,
+                radiance,
+                flux,
+            })
+            .collect();
+        Self { cells }
+    }
+
+    /// A bound on `|∫ ΔL cos θ dω|` over the hemisphere of `normal` at `origin`: the sum
+    /// of every cell's bound (`ChangeCell::bound`).
+    pub fn bound(&self, origin: Vec3, normal: Vec3) -> f32 {
+        self.cells.iter().map(|c| c.bound(origin, normal)).sum()
+    }
+
+    /// The plan for the point at `origin` with unit normal `normal` that may leave out a
+    /// change of `allowance` (W/m²). `|∫ ΔL cos θ dω| ≤ Σ_c ∫_c |ΔL| cos θ dω`, each
+    /// cell's part bounded by `ChangeCell::bound`. If the sum is within the allowance, nothing is estimated; else the
+    /// cells with the smallest contributions, together within it, are left out of the
+    /// cone the change is integrated over.
+    pub fn plan(&self, origin: Vec3, normal: Vec3, allowance: f32) -> ChangePlan {
+        let mut parts: Vec<(f32, usize)> = self
+            .cells
+            .iter()
+            .enumerate()
+            .map(|(i, cell)| (cell.bound(origin, normal), i))
+            .filter(|&(w, _)| w > 0.0)
+            .collect();
+        let total: f32 = parts.iter().map(|p| p.0).sum();
+        // A bound that is not a number (an unknown change) never skips.
+        if total <= allowance {
+            return ChangePlan::Unchanged;
+        }
+        parts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut left_out = 0.0;
+        let mut first = 0;
+        while first < parts.len() && left_out + parts[first].0 <= allowance {
+            left_out += parts[first].0;
+            first += 1;
+        }
+        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+        for &(_, i) in &parts[first..] {
+            let ChangeCell { centre, radius, .. } = self.cells[i];
+            (lo, hi) = (lo.min(centre - radius), hi.max(centre + radius));
+        }
+        let cone = Cone::towards_sphere(origin, 0.5 * (lo + hi), 0.5 * (hi - lo).length());
+        if cone.cos_max <= 0.0 {
+            ChangePlan::Hemisphere
+        } else {
+            ChangePlan::Cone(cone)
+        }
+    }
+}
+
+/// `∫_{cone ∩ H} cos θ dω ≤ min(Ω · cos θ_min, π)` over the hemisphere H of `normal`, θ_min
+/// the smallest angle between the normal and a direction of the cone, and cos θ_min
+/// itself; (0, 0) when the cone lies below the surface.
+fn cone_cosine_bound(cone: &Cone, normal: Vec3) -> (f32, f32) {
+    if cone.cos_max <= -1.0 {
+        return (PI, 1.0);
+    }
+    if cone.below(normal) {
+        return (0.0, 0.0);
+    }
+    // cos(θ − α) from the cosines alone: θ between the normal and the axis, α the
+    // cone's half-angle.
+    let cos_theta = normal.dot(cone.axis).clamp(-1.0, 1.0);
+    let cos_min = if cos_theta >= cone.cos_max {
+        1.0
+    } else {
+        let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+        let sin_half = (1.0 - cone.cos_max * cone.cos_max).max(0.0).sqrt();
+        (cos_theta * cone.cos_max + sin_theta * sin_half).clamp(0.0, 1.0)
+    };
+    ((cone.solid_angle() * cos_min).min(PI), cos_min)
 }

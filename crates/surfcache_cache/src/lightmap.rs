@@ -814,3 +814,65 @@ impl SurfaceCache for Lightmaps {
         out
     }
 }
+
+impl Lightmaps {
+    /// Per triangle (of the scene `self` was laid out over): the largest change, in any
+    /// channel and layer, of the texels a lookup on it can read (its UV1 box plus the
+    /// bilinear footprint), against `before` looked up on `triangle_map[t]`. Where the
+    /// layouts differ, the sum of both sides' largest values bounds the change.
+    pub fn triangle_changes(&self, before: &Lightmaps, triangle_map: &[u32]) -> Vec<f32> {
+        (0..self.triangle_instance.len())
+            .map(|t| {
+                let t_old = triangle_map.get(t).copied().unwrap_or(UNMAPPED);
+                let same_layout = t_old != UNMAPPED && {
+                    let (i, io) = (
+                        self.triangle_instance[t] as usize,
+                        before.triangle_instance[t_old as usize] as usize,
+                    );
+                    let (m, mo) = (&self.maps[i], &before.maps[io]);
+                    (m.width, m.height) == (mo.width, mo.height)
+                        && self.uv1[t] == before.uv1[t_old as usize]
+                        && self.layers == before.layers
+                };
+                let mut change = 0.0f32;
+                for layer in 0..self.layers {
+                    let after = self.footprint(layer, t as u32);
+                    if same_layout {
+                        let old = before.footprint(layer, t_old);
+                        for (a, b) in after.zip(old) {
+                            change = change.max((a - b).abs().max_element());
+                        }
+                    } else {
+                        let a = after.fold(0.0f32, |m, v| m.max(v.abs().max_element()));
+                        let b = if t_old == UNMAPPED || layer >= before.layers {
+                            0.0
+                        } else {
+                            before
+                                .footprint(layer, t_old)
+                                .fold(0.0f32, |m, v| m.max(v.abs().max_element()))
+                        };
+                        change = change.max(a + b);
+                    }
+                }
+                change
+            })
+            .collect()
+    }
+
+    /// The texels of `layer` that bilinear lookups on `triangle` read, row by row.
+    fn footprint(&self, layer: usize, triangle: u32) -> impl Iterator<Item = Vec3> + '_ {
+        let instance = self.triangle_instance[triangle as usize] as usize;
+        let m = self.maps[instance];
+        let texels = self.texture_slice(layer, instance);
+        let [a, b, c] = self.uv1[triangle as usize];
+        let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+        let size = Vec2::new(m.width as f32, m.height as f32);
+        let first = ((lo * size - 0.5).floor().max(Vec2::ZERO)).as_uvec2();
+        let last = (hi * size - 0.5).floor().max(Vec2::ZERO).as_uvec2() + 1;
+        let last = last.min(glam::UVec2::new(m.width - 1, m.height - 1));
+        let first = first.min(last);
+        (first.y..=last.y).flat_map(move |y| {
+            (first.x..=last.x).map(move |x| self.scale.unpack(texels[(y * m.width + x) as usize]))
+        })
+    }
+}

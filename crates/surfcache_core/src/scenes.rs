@@ -30,6 +30,22 @@ pub fn quad(name: impl Into<String>, c: [Vec3; 4], facing: Vec3) -> Mesh {
     Mesh::new(name, c.to_vec(), vec![[0, 1, 2], [0, 2, 3]])
 }
 
+/// A horizontal square of half-side `half` centred on the Y axis at height `y`, its front
+/// face looking along `facing` (a floor: `Vec3::Y`; a ceiling panel: `-Vec3::Y`).
+pub fn square(name: impl Into<String>, half: f32, y: f32, facing: Vec3) -> Mesh {
+    let v = |x: f32, z: f32| Vec3::new(x, y, z);
+    quad(
+        name,
+        [
+            v(-half, -half),
+            v(half, -half),
+            v(half, half),
+            v(-half, half),
+        ],
+        facing,
+    )
+}
+
 /// Appends `other`'s triangles to `mesh` (vertices are not shared between the two).
 pub fn append(mesh: &mut Mesh, other: &Mesh) {
     let base = mesh.positions.len() as u32;

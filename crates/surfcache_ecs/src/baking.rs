@@ -13,12 +13,15 @@
 //!
 //! Otherwise it bakes from scratch. An incremental re-bake
 //! ([`surfcache_cache::incremental::IncrementalJob`]) keeps every sample of unchanged
-//! triangles as a prior, and re-estimates the *change* of each sample in two stages: the
-//! direct change through the directions towards the box around the changed instances'
-//! old and new surfaces (exactly zero, without tracing, where that box lies below a
-//! sample's horizon), then the indirect change from surfaces whose irradiance changed.
-//! Left out, as its docs bound: changes that reach a sample over three or more bounces
-//! off the edited region.
+//! triangles as a prior, and re-estimates the *change* of each sample: first the direct
+//! change through the directions towards the box around the changed instances' old and
+//! new surfaces (exactly zero, without tracing, where that box lies below a sample's
+//! horizon), then three stages of indirect change from surfaces whose irradiance changed
+//! in the stage before. Each indirect stage bounds its change at every point from all
+//! stored samples (`surfcache_cache::incremental::ChangeBound`) and skips the points
+//! where the bound is below a quarter of their error bound. Left out, as its docs bound:
+//! changes that reach a sample over more than four bounces off the edited region, and
+//! what the skipped points' bounds allow.
 //!
 //! **Never blocking a frame.** In [`BakeMode::Background`] (the default) the BVH build
 //! and the bake run on background threads (the bake on a rayon pool of

@@ -26,7 +26,12 @@ pub enum SurfcacheSet {
 ///
 /// With a plain `bevy_ecs` [`Schedule`] (no `bevy_app`), run frames with
 /// [`SurfcachePlugin::update`], which also advances messages and clears removal
-/// trackers as an app would.
+/// trackers as an app would. With the cargo feature `app` it is also a `bevy_app`
+/// `Plugin` whose systems run in `Update`:
+///
+/// ```ignore
+/// App::new().add_plugins(SurfcachePlugin::default()).run();
+/// ```
 #[derive(Clone, Debug, Default)]
 pub struct SurfcachePlugin {
     /// Bake settings; `None` keeps a [`BakeConfig`] already in the world, or the default.
@@ -43,6 +48,14 @@ impl SurfcachePlugin {
 
     /// Adds the resources to `world` and the systems to `schedule`, in [`SurfcacheSet`] order.
     pub fn build(&self, world: &mut World, schedule: &mut Schedule) {
+        self.insert_resources(world);
+        MessageRegistry::register_message::<BakeFinished>(world);
+        schedule.add_systems(message_update_system.before(SurfcacheSet::SceneSync));
+        Self::add_systems(schedule);
+    }
+
+    /// The resources, with this plugin's [`BakeConfig`].
+    fn insert_resources(&self, world: &mut World) {
         match &self.config {
             Some(c) => world.insert_resource(c.clone()),
             None => {
@@ -57,7 +70,10 @@ impl SurfcachePlugin {
         world.init_resource::<FinishedBake>();
         world.init_resource::<SurfaceCacheResource>();
         world.init_resource::<PublishedLightmaps>();
-        MessageRegistry::register_message::<BakeFinished>(world);
+    }
+
+    /// The systems, in [`SurfcacheSet`] order (messages are advanced by the caller).
+    fn add_systems(schedule: &mut Schedule) {
         schedule.configure_sets(
             (
                 SurfcacheSet::SceneSync,
@@ -69,7 +85,6 @@ impl SurfcachePlugin {
                 .chain(),
         );
         schedule.add_systems((
-            message_update_system.before(SurfcacheSet::SceneSync),
             (detect_scene_changes, start_bvh_build)
                 .chain()
                 .in_set(SurfcacheSet::SceneSync),
@@ -161,4 +176,15 @@ pub fn spawn_scene(world: &mut World, scene: &Scene) -> Vec<Entity> {
     }
     world.spawn(EnvironmentLight(scene.environment.clone()));
     entities
+}
+
+/// With `bevy_app`: the resources, the [`BakeFinished`] message (advanced by the app) and
+/// the systems in the app's `Update` schedule.
+#[cfg(feature = "app")]
+impl bevy_app::Plugin for SurfcachePlugin {
+    fn build(&self, app: &mut bevy_app::App) {
+        self.insert_resources(app.world_mut());
+        app.add_message::<BakeFinished>();
+        app.edit_schedule(bevy_app::Update, Self::add_systems);
+    }
 }

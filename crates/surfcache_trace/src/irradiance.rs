@@ -370,7 +370,9 @@ pub const CHANGE_FALLBACK_FACTOR: f32 = 2.0;
 /// and random numbers in both scenes, X = X_new − X_old, so wherever the edit does not
 /// touch a path the difference is exactly zero and the estimate stops after
 /// [`CHANGE_MIN_SAMPLES`] pairs; it stops when its standard error is at most
-/// [`CHANGE_ERROR_SHARE`] × bound × (E + ε). Unbiased: E = E_old + E[X_new − X_old].
+/// [`CHANGE_ERROR_SHARE`] × bound × (E + ε). Unbiased, E = E_old + E[X_new − X_old],
+/// except that a change within one standard error of zero is taken as zero (it moves
+/// the value by less than the change's error share; far from an edit it is noise).
 /// The punctual lights' exact parts enter as their difference too. An all-zero run of
 /// differences is exact where no path meets the edit, so it stops as it is (no
 /// [`ZERO_RUN_EVENTS`] bound: a re-bake would otherwise sample every untouched point
@@ -397,19 +399,20 @@ pub fn estimate_change(
         && new.scene.lights.is_empty()
         && old.scene.lights.is_empty()
     {
-        return Estimate {
-            value: prior,
-            std_error: with_prior_error(prior, Vec3::ZERO, settings),
-            ..Default::default()
-        };
+        return unchanged(prior, settings);
     }
     let mut punctual_rays = 0;
-    let punctual_new =
-        new.scene
-            .punctual_irradiance_from(&new.point, new.origin, &mut punctual_rays);
-    let punctual_old =
-        old.scene
-            .punctual_irradiance_from(&old.point, old.origin, &mut punctual_rays);
+    // Within one scene (the indirect stages of a re-bake) the punctual parts cancel.
+    let (punctual_new, punctual_old) = if std::ptr::eq(old.scene, new.scene) {
+        (Vec3::ZERO, Vec3::ZERO)
+    } else {
+        (
+            new.scene
+                .punctual_irradiance_from(&new.point, new.origin, &mut punctual_rays),
+            old.scene
+                .punctual_irradiance_from(&old.point, old.origin, &mut punctual_rays),
+        )
+    };
     let bound = settings.max_rel_error * CHANGE_ERROR_SHARE;
     let change = |max_samples: u32| {
         let settings = EstimatorSettings {
@@ -458,10 +461,29 @@ pub fn estimate_change(
         (e, fresh)
     };
     if !fresh {
+        // A sampled change within one standard error of zero in every channel is noise
+        // as far as this estimate can tell: keep the prior (plus the exact punctual
+        // change). The value then differs from the unbiased one by at most that standard
+        // error, within the change's error share, and re-bakes do not spread the noise
+        // of far points, which an edit barely touches, through their indirect stages.
+        let offset = prior + punctual_new - punctual_old;
+        if (e.value - offset).abs().cmple(e.std_error).all() {
+            e.value = offset;
+        }
         e.std_error = with_prior_error(e.value, e.std_error, settings);
     }
     e.rays += punctual_rays as u64;
     e
+}
+
+/// The estimate of a point whose change is known to be zero (or is left out): its
+/// `prior`, with the prior's error ([`estimate_change`]); no samples, no rays.
+pub fn unchanged(prior: Vec3, settings: &EstimatorSettings) -> Estimate {
+    Estimate {
+        value: prior,
+        std_error: with_prior_error(prior, Vec3::ZERO, settings),
+        ..Default::default()
+    }
 }
 
 /// The standard error of prior + change: the prior's, taken at the bound its estimate
