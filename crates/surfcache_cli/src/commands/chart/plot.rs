@@ -43,6 +43,23 @@ fn sampler_colour(base: RGBColor, sampler: &str) -> RGBColor {
     RGBColor(mix(base.0), mix(base.1), mix(base.2))
 }
 
+/// The point marker of a sampler's curves, `size` pixels from its centre, `dx` right of
+/// the point: best ■, uniform ●, cosine ▲, qmc ✕, mis ○.
+fn marker<DB: DrawingBackend>(
+    sampler: &str,
+    colour: RGBColor,
+    dx: i32,
+    size: i32,
+) -> DynElement<'static, DB, (i32, i32)> {
+    match sampler {
+        "uniform" => Circle::new((dx, 0), size, colour.filled()).into_dyn(),
+        "cosine" => TriangleMarker::new((dx, 0), size + 1, colour.filled()).into_dyn(),
+        "qmc" => Cross::new((dx, 0), size, colour.stroke_width(2)).into_dyn(),
+        "mis" => Circle::new((dx, 0), size, colour.stroke_width(2)).into_dyn(),
+        _ => Rectangle::new([(dx - size, -size), (dx + size, size)], colour.filled()).into_dyn(),
+    }
+}
+
 /// Log-axis range holding `values`, widened to whole decades (so that every decade gets
 /// its labels).
 fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
@@ -187,30 +204,13 @@ fn draw_panel(
             .legend(move |(x, y)| {
                 EmptyElement::at((x, y))
                     + PathElement::new(vec![(-8, 0), (12, 0)], colour.stroke_width(width))
-                    + match sampler_name.as_str() {
-                        "uniform" => Circle::new((2, 0), 4, colour.filled()).into_dyn(),
-                        "cosine" => TriangleMarker::new((2, 0), 5, colour.filled()).into_dyn(),
-                        _ => Rectangle::new([(-2, -4), (6, 4)], colour.filled()).into_dyn(),
-                    }
+                    + marker(&sampler_name, colour, 2, 4)
             });
-        let at = points.iter().map(|p| (p.1, p.2));
-        let style = colour.filled();
-        match sampler {
-            "uniform" => {
-                chart
-                    .draw_series(at.map(|c| EmptyElement::at(c) + Circle::new((0, 0), 5, style)))?;
-            }
-            "cosine" => {
-                chart.draw_series(
-                    at.map(|c| EmptyElement::at(c) + TriangleMarker::new((0, 0), 6, style)),
-                )?;
-            }
-            _ => {
-                chart.draw_series(
-                    at.map(|c| EmptyElement::at(c) + Rectangle::new([(-4, -4), (4, 4)], style)),
-                )?;
-            }
-        }
+        chart.draw_series(
+            points
+                .iter()
+                .map(|p| EmptyElement::at((p.1, p.2)) + marker(sampler, colour, 0, 5)),
+        )?;
     }
     chart
         .configure_series_labels()
