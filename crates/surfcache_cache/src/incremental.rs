@@ -398,6 +398,12 @@ impl ChangeBound {
     /// cells with the smallest contributions, together within it, are left out of the
     /// cone the change is integrated over.
     pub fn plan(&self, origin: Vec3, normal: Vec3, allowance: f32) -> ChangePlan {
+        // A bound that is not a number (an unknown change) never skips.
+        if self.bound(origin, normal) <= allowance {
+            return ChangePlan::Unchanged;
+        }
+        // Only points that are estimated get here (and then trace at least
+        // `CHANGE_MIN_SAMPLES` pairs): the cells' parts again, sorted.
         let mut parts: Vec<(f32, usize)> = self
             .cells
             .iter()
@@ -405,11 +411,6 @@ impl ChangeBound {
             .map(|(i, cell)| (cell.bound(origin, normal), i))
             .filter(|&(w, _)| w > 0.0)
             .collect();
-        let total: f32 = parts.iter().map(|p| p.0).sum();
-        // A bound that is not a number (an unknown change) never skips.
-        if total <= allowance {
-            return ChangePlan::Unchanged;
-        }
         parts.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut left_out = 0.0;
         let mut first = 0;
