@@ -26,12 +26,10 @@ fn app_plugin_bakes_a_floor_under_a_uniform_sky() {
         environment: Environment::uniform(radiance),
         ..Default::default()
     };
-    scene.instances.push(surfcache::core::Instance {
-        name: "floor".into(),
-        mesh: std::sync::Arc::new(floor),
-        material: std::sync::Arc::new(Material::diffuse("grey", Vec3::splat(0.5))),
-        transform: glam::Affine3A::IDENTITY,
-    });
+    scene.instances.push(surfcache::core::Instance::new(
+        floor,
+        Material::diffuse("grey", Vec3::splat(0.5)),
+    ));
     let mut cache = CacheSettings::for_method(Method::Lightmap);
     cache.set_density(8.0);
     let config = BakeConfig {

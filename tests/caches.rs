@@ -33,7 +33,7 @@ use surfcache::cache::{
 use surfcache::core::{
     Environment, EnvironmentMap, Instance, Light, Material, Mesh, Scene,
     geometry::orthonormal_basis,
-    glam::{Affine3A, Vec2, Vec3},
+    glam::{Vec2, Vec3},
     scenes::{append, cuboid, quad},
 };
 use surfcache::trace::{EstimatorSettings, Sampler, TracedScene};
@@ -44,15 +44,6 @@ const ASSETS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
 // ---------------------------------------------------------------------------------------
 // Helpers
 // ---------------------------------------------------------------------------------------
-
-fn instance(mesh: Mesh, material: Material) -> Instance {
-    Instance {
-        name: mesh.name.clone(),
-        mesh: Arc::new(mesh),
-        material: Arc::new(material),
-        transform: Affine3A::IDENTITY,
-    }
-}
 
 fn grey(albedo: f32) -> Material {
     Material::diffuse("grey", Vec3::splat(albedo))
@@ -259,7 +250,7 @@ fn plane_under_uniform_sky_gets_pi_l_from_every_bake_job() {
     let l = Vec3::new(0.5, 1.0, 2.0);
     let n = Vec3::new(0.3, 1.0, -0.2).normalize();
     let traced = TracedScene::new(&scene(
-        vec![instance(square("plane", n, 2.0), grey(0.5))],
+        vec![Instance::new(square("plane", n, 2.0), grey(0.5))],
         Environment::uniform(l),
         Vec::new(),
     ))
@@ -291,7 +282,7 @@ fn plane_under_uniform_sky_gets_pi_l_through_bake_and_query() {
     let dir = temp_dir("plane_cli");
     let l = Vec3::new(0.5, 1.0, 2.0);
     let plane = scene(
-        vec![instance(square("plane", Vec3::Y, 2.0), grey(0.5))],
+        vec![Instance::new(square("plane", Vec3::Y, 2.0), grey(0.5))],
         Environment::black(),
         Vec::new(),
     );
@@ -401,7 +392,7 @@ fn tilted_planes_under_sky_only_map_every_method() {
             );
         }
         let traced = TracedScene::new(&scene(
-            vec![instance(square("plane", n, 1.0), grey(0.5))],
+            vec![Instance::new(square("plane", n, 1.0), grey(0.5))],
             environment.clone(),
             Vec::new(),
         ))
@@ -480,8 +471,8 @@ fn box_shadow_under_directional_light_maps_and_lightmaps() {
     let es = 2.0;
     let traced = TracedScene::new(&scene(
         vec![
-            instance(tiled_floor(4.0, 16), grey(0.5)),
-            instance(cuboid("box", lo, hi, false), grey(0.0)),
+            Instance::new(tiled_floor(4.0, 16), grey(0.5)),
+            Instance::new(cuboid("box", lo, hi, false), grey(0.0)),
         ],
         Environment::black(),
         vec![Light::Directional {

@@ -3,28 +3,18 @@
 //! Each scene has an exact answer; the estimate must lie within 3 standard errors of it
 //! (plus a float-precision allowance where the estimator has no variance at all).
 
-use std::sync::Arc;
 use surfcache::core::EnvironmentMap;
 use surfcache::core::{
-    Environment, Instance, Light, Material, Mesh, Scene,
-    glam::{Affine3A, Vec3},
+    Environment, Instance, Light, Material, Scene,
+    glam::Vec3,
     scenes::{cuboid, quad},
 };
 use surfcache::trace::{EstimatorSettings, Query, Sampler, TracedScene, reference_irradiance};
 
-fn instance(mesh: Mesh, material: Material) -> Instance {
-    Instance {
-        name: mesh.name.clone(),
-        mesh: Arc::new(mesh),
-        material: Arc::new(material),
-        transform: Affine3A::IDENTITY,
-    }
-}
-
 /// A square of half-size `h` in the plane y = 0, facing +Y.
 fn floor(h: f32, albedo: f32) -> Instance {
     let v = Vec3::new;
-    instance(
+    Instance::new(
         quad(
             "floor",
             [v(-h, 0., -h), v(h, 0., -h), v(h, 0., h), v(-h, 0., h)],
@@ -118,7 +108,7 @@ fn light_tight_box_stays_black_inside() {
     // A closed 1 m box under a very bright sky; points on the floor's centre and 1 mm from
     // walls, edges and corners.
     let scene = Scene {
-        instances: vec![instance(
+        instances: vec![Instance::new(
             cuboid("box", Vec3::ZERO, Vec3::ONE, true),
             Material::diffuse("wall", Vec3::splat(0.8)),
         )],
@@ -165,7 +155,7 @@ fn furnace_box_matches_geometric_series() {
     let mut wall = Material::emissive("wall", Vec3::splat(rho), le);
     wall.double_sided = false;
     let scene = Scene {
-        instances: vec![instance(
+        instances: vec![Instance::new(
             cuboid("box", Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0), true),
             wall,
         )],
@@ -235,7 +225,7 @@ fn directional_light_gives_cosine_law_and_hard_shadow() {
     let scene = Scene {
         instances: vec![
             floor(10.0, 0.0),
-            instance(
+            Instance::new(
                 cuboid(
                     "blocker",
                     Vec3::new(-0.5, 0.0, -0.5),
@@ -270,7 +260,7 @@ fn bounce_limit_zero_counts_only_first_hits() {
     // Furnace again with no indirect bounces: E = π Le exactly.
     let le = Vec3::splat(1.0);
     let scene = Scene {
-        instances: vec![instance(
+        instances: vec![Instance::new(
             cuboid("box", Vec3::ZERO, Vec3::ONE, true),
             Material::emissive("wall", Vec3::splat(0.9), le),
         )],
@@ -334,7 +324,7 @@ fn tilted_planes_under_sky_only_map() {
         let h = 0.5;
         let corners = [(-h, -h), (h, -h), (h, h), (-h, h)].map(|(x, y)| t * x + b * y);
         let scene = Scene {
-            instances: vec![instance(
+            instances: vec![Instance::new(
                 quad("plane", corners, n),
                 Material::diffuse("black", Vec3::ZERO),
             )],

@@ -26,7 +26,7 @@ use surfcache::core::{
     Environment, EnvironmentMap, Instance, Light, Material, Mesh, Scene,
     environment::uv_to_direction,
     geometry::orthonormal_basis,
-    glam::{Affine3A, Vec2, Vec3},
+    glam::{Vec2, Vec3},
     scenes::{append, cuboid, quad, square},
 };
 use surfcache::trace::{
@@ -36,15 +36,6 @@ use surfcache::trace::{
 // ---------------------------------------------------------------------------------------
 // Helpers
 // ---------------------------------------------------------------------------------------
-
-fn instance(mesh: Mesh, material: Material) -> Instance {
-    Instance {
-        name: mesh.name.clone(),
-        mesh: Arc::new(mesh),
-        material: Arc::new(material),
-        transform: Affine3A::IDENTITY,
-    }
-}
 
 fn grey(albedo: f32) -> Material {
     Material::diffuse("grey", Vec3::splat(albedo))
@@ -243,7 +234,10 @@ fn thin_wall_leaks_only_through_vertex_lighting() {
     let (sky, sun) = (100.0, 1000.0);
     let to_sun = v(1.0, 0.5, -0.2).normalize();
     let scene = traced(
-        vec![instance(room, grey(0.8)), instance(slab, grey(0.8))],
+        vec![
+            Instance::new(room, grey(0.8)),
+            Instance::new(slab, grey(0.8)),
+        ],
         Environment::uniform(Vec3::splat(sky)),
         vec![Light::Directional {
             direction: -to_sun,
@@ -378,7 +372,10 @@ fn shadow_strip_between_coarse_samples_is_caught_by_shadow_probes() {
     );
     let (sky, sun) = (0.1, 3.0);
     let scene = traced(
-        vec![instance(floor, grey(0.0)), instance(bar, grey(0.0))],
+        vec![
+            Instance::new(floor, grey(0.0)),
+            Instance::new(bar, grey(0.0)),
+        ],
         Environment::uniform(Vec3::splat(sky)),
         vec![Light::Directional {
             direction: Vec3::NEG_Y,
@@ -529,7 +526,7 @@ fn periscope(a: f32, h: f32, l: f32) -> Mesh {
 fn dark_niche_black_blotches_and_how_gathering_removes_them() {
     let (a, h, l) = (0.1, 0.3, 0.4);
     let scene = traced(
-        vec![instance(periscope(a, h, l), grey(0.8))],
+        vec![Instance::new(periscope(a, h, l), grey(0.8))],
         Environment::uniform(Vec3::ONE),
         Vec::new(),
     );
@@ -639,7 +636,7 @@ fn dark_niche_black_blotches_and_how_gathering_removes_them() {
     let zero_run = zero_run.div_ceil(16) * 16;
     for (inward, expected) in [(true, zero_run), (false, 256)] {
         let boxed = traced(
-            vec![instance(
+            vec![Instance::new(
                 cuboid("box", Vec3::ZERO, Vec3::ONE, inward),
                 grey(0.8),
             )],
@@ -673,8 +670,8 @@ fn floor_around_a_sunken_box(thresholds: [f32; 2]) -> [([f32; 2], [u64; 2]); 2] 
     let floor = square("floor", 0.6, 0.0, Vec3::Y);
     let scene = traced(
         vec![
-            instance(floor, grey(0.5)),
-            instance(cuboid("box", lo, hi, false), grey(0.5)),
+            Instance::new(floor, grey(0.5)),
+            Instance::new(cuboid("box", lo, hi, false), grey(0.5)),
         ],
         Environment::uniform(Vec3::ONE),
         Vec::new(),
@@ -857,7 +854,7 @@ fn degenerate_triangles_are_dropped_and_needles_bake_finite() {
     let path = dir.join("junk.gltf");
     let written = Scene {
         name: "junk".into(),
-        instances: vec![instance(mesh.clone(), white.clone())],
+        instances: vec![Instance::new(mesh.clone(), white.clone())],
         lights: Vec::new(),
         environment: furnace.clone(),
     };
@@ -872,7 +869,7 @@ fn degenerate_triangles_are_dropped_and_needles_bake_finite() {
     assert_eq!(from_file.triangle_count(), total - degenerate);
 
     // Built in code without dropping: the tracer skips what has no normal.
-    let raw = traced(vec![instance(mesh, white)], furnace, Vec::new());
+    let raw = traced(vec![Instance::new(mesh, white)], furnace, Vec::new());
     assert!(raw.triangle_count() >= total - degenerate && raw.triangle_count() < total);
 
     let rel = 0.05;
@@ -990,7 +987,7 @@ fn hdr_sun_is_sampled_without_fireflies() {
     let (t, b) = orthonormal_basis(sun);
     let corners = [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)].map(|(x, y)| t * x + b * y);
     let scene = traced(
-        vec![instance(quad("plane", corners, sun), grey(0.5))],
+        vec![Instance::new(quad("plane", corners, sun), grey(0.5))],
         Environment::from_map(Arc::new(map)),
         Vec::new(),
     );
@@ -1078,7 +1075,7 @@ fn closed_forms_hold_at_1_mm_and_10_km() {
     for s in [1e-3f32, 1e4] {
         // The plane: E = πL on both sides.
         let plane = traced(
-            vec![instance(
+            vec![Instance::new(
                 quad(
                     "plane",
                     [v(0., 0., 0.), v(s, 0., 0.), v(s, 0., s), v(0., 0., s)],
@@ -1113,7 +1110,7 @@ fn closed_forms_hold_at_1_mm_and_10_km() {
         // The light-tight box.
         let sky = 1e4;
         let boxed = traced(
-            vec![instance(
+            vec![Instance::new(
                 cuboid("box", Vec3::ZERO, Vec3::splat(s), true),
                 grey(0.8),
             )],
@@ -1210,7 +1207,7 @@ fn bent_shading_normals_never_see_below_the_surface() {
     let wedge = PI * l * (1.0 + bend.cos()) / 2.0;
     let scene = |lights: Vec<Light>| {
         traced(
-            vec![instance(plane.clone(), grey(0.5))],
+            vec![Instance::new(plane.clone(), grey(0.5))],
             Environment::uniform(l),
             lights,
         )
@@ -1287,7 +1284,7 @@ fn bent_shading_normals_never_see_below_the_surface() {
         v(mu.y + mu.z, mu.z + mu.x, mu.x + mu.y)
     });
     let boxed = traced(
-        vec![instance(bent_box, grey(0.8))],
+        vec![Instance::new(bent_box, grey(0.8))],
         Environment::uniform(Vec3::splat(sky)),
         Vec::new(),
     );

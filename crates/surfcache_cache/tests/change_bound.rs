@@ -4,10 +4,10 @@
 
 mod common;
 
-use common::{PI, instance};
+use common::PI;
 use surfcache_cache::incremental::{ChangeBound, ChangePlan};
 use surfcache_core::{
-    Environment, Material, Scene,
+    Environment, Instance, Material, Scene,
     glam::{Vec2, Vec3},
     scenes::square,
 };
@@ -21,7 +21,10 @@ fn floor_and_patch() -> TracedScene {
     let patch = square("patch", 0.25, 2.0, -Vec3::Y);
     TracedScene::new(&Scene {
         name: "patch".into(),
-        instances: vec![instance(floor, material.clone()), instance(patch, material)],
+        instances: vec![
+            Instance::new(floor, material.clone()),
+            Instance::new(patch, material),
+        ],
         lights: vec![],
         environment: Environment::black(),
     })

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{Points, bake_synthetic, instance};
+use common::{Points, bake_synthetic};
 use std::collections::HashSet;
 use surfcache_cache::{
     SampleSite, SurfaceCache,
@@ -16,7 +16,7 @@ use surfcache_cache::{
     vertex_lighting::{VertexLighting, VertexLightingSettings},
 };
 use surfcache_core::{
-    Material, Mesh, Scene,
+    Instance, Material, Mesh, Scene,
     glam::{Vec2, Vec3},
     scenes::quad,
 };
@@ -131,7 +131,7 @@ fn grid_interpolation_is_exact_for_linear_functions_and_at_samples() {
 fn unit_floor() -> Scene {
     let v = Vec3::new;
     Scene {
-        instances: vec![instance(
+        instances: vec![Instance::new(
             quad(
                 "floor",
                 [v(0., 0., 0.), v(1., 0., 0.), v(1., 0., 1.), v(0., 0., 1.)],
@@ -260,7 +260,7 @@ fn buried_samples_are_filled_from_neighbours_and_counted() {
     let v = Vec3::new;
     let mut scene = unit_floor();
     // A second quad far above, buried all over.
-    scene.instances.push(instance(
+    scene.instances.push(Instance::new(
         quad(
             "attic",
             [v(0., 5., 0.), v(1., 5., 0.), v(1., 5., 1.), v(0., 5., 1.)],
@@ -347,11 +347,11 @@ fn vertex_lighting_estimates_each_mesh_vertex_once_per_side() {
         }
     }
     let mesh = Mesh::new("grid", positions, indices);
-    let mut second = instance(mesh.clone(), Material::default());
+    let mut second = Instance::new(mesh.clone(), Material::default());
     second.name = "grid2".into();
     second.transform = surfcache_core::glam::Affine3A::from_translation(Vec3::Y);
     let scene = Scene {
-        instances: vec![instance(mesh, Material::default()), second],
+        instances: vec![Instance::new(mesh, Material::default()), second],
         ..Default::default()
     };
     let traced = TracedScene::new(&scene).unwrap();

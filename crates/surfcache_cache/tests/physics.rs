@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{PI, Points, estimator, instance, locate};
+use common::{PI, Points, estimator, locate};
 use surfcache_cache::{
     SurfaceCache,
     bake::{Baker, FLOOR_FRACTION, bake_to_convergence, mean_irradiance},
@@ -16,7 +16,7 @@ use surfcache_cache::{
     vertex_lighting::{VertexLighting, VertexLightingSettings},
 };
 use surfcache_core::{
-    Environment, Light, Material, Mesh, Scene,
+    Environment, Instance, Light, Material, Mesh, Scene,
     glam::{Vec2, Vec3},
     scenes::{append, cornell, cuboid, quad},
 };
@@ -64,7 +64,7 @@ fn plane_under_uniform_sky_receives_pi_l() {
     let v = Vec3::new;
     let h = 10.0;
     let scene = Scene {
-        instances: vec![instance(
+        instances: vec![Instance::new(
             quad(
                 "floor",
                 [v(-h, 0., -h), v(h, 0., -h), v(h, 0., h), v(-h, 0., h)],
@@ -133,7 +133,7 @@ fn points_near_walls() -> Vec<(Vec3, Vec3)> {
 fn light_tight_box_stays_black_inside_maps_but_vertex_lighting_leaks() {
     let sky = 1e4;
     let scene = Scene {
-        instances: vec![instance(
+        instances: vec![Instance::new(
             cuboid("box", Vec3::ZERO, Vec3::ONE, true),
             Material::diffuse("wall", Vec3::splat(0.8)),
         )],
@@ -179,7 +179,7 @@ fn furnace(le: Vec3, rho: f32, double_sided: bool, environment: Environment) -> 
     let mut wall = Material::emissive("wall", Vec3::splat(rho), le);
     wall.double_sided = double_sided;
     Scene {
-        instances: vec![instance(
+        instances: vec![Instance::new(
             cuboid("box", Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0), true),
             wall,
         )],
@@ -289,8 +289,8 @@ fn shadow_scene(floor: Mesh, lo: Vec2, hi: Vec2) -> Scene {
     );
     Scene {
         instances: vec![
-            instance(floor, Material::diffuse("floor", Vec3::splat(0.5))),
-            instance(blocker, Material::diffuse("black", Vec3::ZERO)),
+            Instance::new(floor, Material::diffuse("floor", Vec3::splat(0.5))),
+            Instance::new(blocker, Material::diffuse("black", Vec3::ZERO)),
         ],
         lights: vec![Light::Directional {
             direction: Vec3::NEG_Y,

@@ -7,14 +7,14 @@
 
 mod common;
 
-use common::{Points, bake_synthetic, instance};
+use common::{Points, bake_synthetic};
 use surfcache_cache::{
     IrradianceTexture, SurfaceCache,
     irradiance_map::{IrradianceMapSettings, IrradianceMaps},
     vertex_lighting::{VertexLighting, VertexLightingSettings},
 };
 use surfcache_core::{
-    Material, Scene,
+    Instance, Material, Scene,
     geometry::closest_point_barycentric,
     glam::{Affine3A, Quat, Vec2, Vec3},
     scenes::{cuboid, quad},
@@ -24,7 +24,7 @@ use surfcache_trace::{SurfacePoint, TracedScene};
 /// Three instances: a floor, a mirrored double-sided box, a rotated wall.
 fn scene() -> Scene {
     let v = Vec3::new;
-    let mut mirrored = instance(
+    let mut mirrored = Instance::new(
         cuboid("box", v(0.0, 0.0, 0.0), v(0.5, 0.7, 0.3), false),
         Material {
             double_sided: true,
@@ -36,7 +36,7 @@ fn scene() -> Scene {
         Quat::IDENTITY,
         v(1.0, 0.0, 0.5),
     );
-    let mut wall = instance(
+    let mut wall = Instance::new(
         quad(
             "wall",
             [
@@ -53,7 +53,7 @@ fn scene() -> Scene {
         Affine3A::from_rotation_translation(Quat::from_rotation_y(0.7), v(0.0, 0.0, -1.0));
     Scene {
         instances: vec![
-            instance(
+            Instance::new(
                 quad(
                     "floor",
                     [

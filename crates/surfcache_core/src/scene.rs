@@ -381,6 +381,18 @@ pub struct Instance {
     pub transform: Affine3A,
 }
 
+impl Instance {
+    /// `mesh` with `material`, named after the mesh, placed with the identity transform.
+    pub fn new(mesh: Mesh, material: Material) -> Self {
+        Self {
+            name: mesh.name.clone(),
+            mesh: Arc::new(mesh),
+            material: Arc::new(material),
+            transform: Affine3A::IDENTITY,
+        }
+    }
+}
+
 /// Everything that is traced: instances, punctual lights and the environment.
 #[derive(Clone, Debug, Default)]
 pub struct Scene {

@@ -1,27 +1,13 @@
-//! Helpers shared by the cache tests: scene building, estimator settings, a small random
+//! Helpers shared by the cache tests: estimator settings, a small random
 //! stream, and a driver that feeds a cache synthetic estimates (no ray tracing).
 
 #![allow(dead_code)]
 
-use std::sync::Arc;
 use surfcache_cache::{SamplePoint, SurfaceCache, bake::sample_frame};
-use surfcache_core::{
-    Instance, Material, Mesh,
-    glam::{Affine3A, Vec2, Vec3},
-};
+use surfcache_core::glam::{Vec2, Vec3};
 use surfcache_trace::{Estimate, EstimatorSettings, Sampler, SurfacePoint, TracedScene};
 
 pub const PI: f32 = std::f32::consts::PI;
-
-/// An instance of `mesh` named after it, with the identity transform.
-pub fn instance(mesh: Mesh, material: Material) -> Instance {
-    Instance {
-        name: mesh.name.clone(),
-        mesh: Arc::new(mesh),
-        material: Arc::new(material),
-        transform: Affine3A::IDENTITY,
-    }
-}
 
 /// Adaptive estimator settings with a floor.
 pub fn estimator(
