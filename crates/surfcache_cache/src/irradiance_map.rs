@@ -6,15 +6,18 @@
 //! Lookup interpolates linearly inside the grid cell that holds `(u, v)`
 //! ([`grid_interpolate`]) and never crosses into another triangle.
 //!
-//! **Generator.** Round 0 asks for every grid at order 2. After each round, every grid
+//! **Generator.** Round 0 asks for every grid at order `min(2, n_max)`. After each round, every grid
 //! that just doubled compares each *new* sample (one with an odd index coordinate) with
 //! the linear interpolation of the coarse grid there: the mean of the two coarse samples
 //! at the ends of the coarse edge it halves ([`coarse_neighbours`]). It doubles again
 //! while the largest difference exceeds
 //! [`IrradianceMapSettings::interpolation_error`] and its order is below its maximum
-//! `n_max = clamp(next_pow2(ceil(longest edge · density)), 2, max_order)`
+//! `n_max = clamp(next_pow2(ceil(longest edge · density)), 1, max_order)`
 //! ([`IrradianceMapSettings::max_order_for`]). Doubling keeps every sample ((i, j) of
-//! order n is (2i, 2j) of order 2n); only the new ones are estimated.
+//! order n is (2i, 2j) of order 2n); only the new ones are estimated. A triangle no
+//! longer than one sample spacing (`longest edge · density ≤ 1`) keeps an order-1 grid,
+//! its three corners: on a finely tessellated mesh (Sponza at a coarse density) the maps
+//! then cost three samples per triangle side instead of six.
 //!
 //! **Shadow probes.** A hard shadow narrower than the coarse sample spacing can fall
 //! between all of a grid's samples (the thesis' misjudged triangle), where no comparison
@@ -37,6 +40,32 @@
 //! gets the same estimate whichever round or order introduced it, so results do not
 //! depend on scheduling.
 //!
+//! **Shared corners** (the thesis' outlook: mark vertices that are safe to share). The
+//! triangles around a mesh vertex all ask for a sample at their corner there. Within one
+//! instance and on the same side, corners are estimated once for every triangle that may
+//! share them, when
+//! 1. they belong to the same mesh vertex and their traced vertex normals are equal
+//!    (a vertex normal facing away from a triangle is replaced by its geometric normal);
+//! 2. their geometric normals differ by at most [`IrradianceMapSettings::share_angle`]
+//!    (default 10°): the shared estimate clips its hemisphere by the representative's
+//!    plane, the other triangle's differs by a lune of dihedral angle α that carries
+//!    (1 − cos α)/2 of E under a uniform sky, 0.76 % at 10°. Coplanar and smoothly
+//!    curved neighbours share; a box's faces, 90° apart, never do;
+//! 3. nothing lies between their two ray origins (each a small step inside its own
+//!    triangle, the leak guard): a wall of another instance standing on the vertex keeps
+//!    the two sides apart.
+//!
+//! The triangles around a vertex are visited in ascending index, and each joins the first
+//! earlier *representative* it may share with or becomes one itself ([`corner_links`]).
+//! A shared corner is estimated at its representative's site with the representative's
+//! key, so results do not depend on which grid asked first; [`SurfaceCache::next_round`]
+//! asks for one point per distinct site and [`SurfaceCache::finish_round`] copies its
+//! estimate into every grid that uses it ([`CacheStats::sample_points`] counts points,
+//! `cache_bytes` stored copies). On a finely tessellated mesh whose triangles keep
+//! order-1 grids (Sponza at a coarse density) the maps then cost about one point per
+//! vertex, like vertex lighting, while larger triangles still refine. Edges are not
+//! shared: their samples are estimated once per adjacent grid.
+//!
 //! **Buried samples.** An estimate whose `back_face_share` exceeds
 //! [`IrradianceMapSettings::buried_threshold`] lies inside other geometry (a floor under
 //! a box). Its value is replaced by the mean of its non-buried grid neighbours, ring by
@@ -52,7 +81,7 @@
 //!
 //! **Storage.** Samples are RGB9E5 (4 bytes, [`Rgb9e5Scale`] chosen from the largest
 //! stored value), grid by grid; a grid slot `2·triangle + side` (side 0 = front) has a
-//! `u32` offset and a `u8` log2 order (0 = not baked). `cache_bytes = 4·samples +
+//! `u32` offset and a `u8` level `log2(order) + 1` (0 = not baked). `cache_bytes = 4·samples +
 //! 5·grid slots + 4` (the last 4: the scale). Estimates' f32 values, standard errors and
 //! burial flags live only while baking.
 //!
@@ -168,6 +197,104 @@ pub fn sample_key(triangle_key: u64, front: bool, i: u32, j: u32, n: u32) -> u64
     splitmix64(triangle_key ^ splitmix64(position ^ 0x1aa4_0000_0000_0000))
 }
 
+/// The order of a grid slot's level `log2(order) + 1` (0: not baked).
+#[inline]
+const fn order_of_level(level: u8) -> u32 {
+    match level {
+        0 => 0,
+        l => 1 << (l - 1),
+    }
+}
+
+/// Which corner (A, B, C = 0, 1, 2) sample `(i, j)` of an order-`n` grid is, if any.
+#[inline]
+const fn corner_of(i: u32, j: u32, n: u32) -> Option<usize> {
+    match (i, j) {
+        (0, 0) => Some(0),
+        (0, _) if j == n => Some(2),
+        (_, 0) if i == n => Some(1),
+        _ => None,
+    }
+}
+
+/// A corner without a representative ([`Working::links`]).
+const UNSHARED: u32 = u32::MAX;
+
+/// The most representatives a vertex keeps while its triangles look for one to share
+/// with ([`corner_links`]); later triangles that match none estimate their own corner.
+const MAX_REPRESENTATIVES: usize = 8;
+
+/// The corner links of every grid slot (module docs, Shared corners): for each instance,
+/// the corners of its triangles grouped by mesh vertex, visited in ascending triangle
+/// index; `baked[slot]` says which grid slots will be baked (the others neither share nor
+/// represent). Costs one any-hit ray per corner that passes rules 1 and 2.
+pub fn corner_links(scene: &TracedScene, cos_max: f32, baked: &[bool]) -> Vec<u32> {
+    use rayon::prelude::*;
+    let slot = |t: u32, front: bool| IrradianceMaps::slot(t, front);
+    let site = |t: u32, k: u8, front: bool| SampleSite::Surface {
+        triangle: t,
+        uv: [Vec2::ZERO, Vec2::X, Vec2::Y][k as usize],
+        front,
+    };
+    // Rules 2 and 3 for corner kr of r (the representative) and corner k of t.
+    let may_share = |(r, kr): (u32, u8), (t, k): (u32, u8), front: bool| {
+        if scene.normals[r as usize][kr as usize] != scene.normals[t as usize][k as usize]
+            || scene.geometric_normals[r as usize].dot(scene.geometric_normals[t as usize])
+                < cos_max
+        {
+            return false;
+        }
+        let (_, a) = crate::bake::sample_frame(scene, &site(r, kr, front));
+        let (_, b) = crate::bake::sample_frame(scene, &site(t, k, front));
+        let d = b - a;
+        let length = d.length();
+        length == 0.0 || !scene.occluded(a, d / length, length)
+    };
+    let per_instance: Vec<Vec<(usize, u32)>> = scene
+        .instance_triangles
+        .par_iter()
+        .map(|range| {
+            let mut items: Vec<(u32, u32, u8)> = range
+                .clone()
+                .flat_map(|t| {
+                    let v = scene.vertex_indices[t as usize];
+                    (0..3u8).map(move |k| (v[k as usize], t, k))
+                })
+                .collect();
+            items.sort_unstable();
+            let mut links = Vec::new();
+            let mut reps: Vec<(u32, u8)> = Vec::new();
+            for group in items.chunk_by(|a, b| a.0 == b.0) {
+                if group.len() < 2 {
+                    continue;
+                }
+                for front in [true, false] {
+                    reps.clear();
+                    for &(_, t, k) in group {
+                        if !baked[slot(t, front)] {
+                            continue;
+                        }
+                        match reps.iter().find(|&&r| may_share(r, (t, k), front)) {
+                            Some(&(r, kr)) => links.push((
+                                3 * slot(t, front) + k as usize,
+                                (3 * slot(r, front) + kr as usize) as u32,
+                            )),
+                            None if reps.len() < MAX_REPRESENTATIVES => reps.push((t, k)),
+                            None => {}
+                        }
+                    }
+                }
+            }
+            links
+        })
+        .collect();
+    let mut links = vec![UNSHARED; 3 * baked.len()];
+    for (corner, link) in per_instance.into_iter().flatten() {
+        links[corner] = link;
+    }
+    links
+}
+
 /// Visits the samples of an order-`n` grid that an order-`n/2` grid lacks (all of them
 /// when `coarse` is 0: a fresh grid), in storage order: `f(i, j, m)`.
 #[inline]
@@ -194,7 +321,7 @@ pub struct IrradianceMapSettings {
     /// on the built-in Cornell box contact shadows at the blocks' feet need this
     /// resolution to reach 1 % relative RMS error (32 gave 1.2 %, 16 gave 1.3–1.5 %).
     pub density: f32,
-    /// Cap on every grid's order (rounded down to a power of two, in 2..=[`MAX_ORDER_LIMIT`]).
+    /// Cap on every grid's order (rounded down to a power of two, in 1..=[`MAX_ORDER_LIMIT`]).
     /// Default 64.
     pub max_order: u32,
     /// Bake the back side of every triangle (true), or only of triangles whose material
@@ -210,6 +337,22 @@ pub struct IrradianceMapSettings {
     /// ε (W/m²) of the relative interpolation error; use the estimator's floor
     /// ([`surfcache_trace::EstimatorSettings::floor`]). Default 0.
     pub floor: f32,
+    /// Estimate a corner once for all triangles around its vertex that may share it
+    /// (module docs, Shared corners). Default true.
+    #[serde(default = "default_share_corners")]
+    pub share_corners: bool,
+    /// Largest angle in degrees between the geometric normals of two triangles that
+    /// share a corner (module docs, Shared corners). Default 10.
+    #[serde(default = "default_share_angle")]
+    pub share_angle: f32,
+}
+
+fn default_share_corners() -> bool {
+    true
+}
+
+fn default_share_angle() -> f32 {
+    10.0
 }
 
 impl Default for IrradianceMapSettings {
@@ -222,28 +365,31 @@ impl Default for IrradianceMapSettings {
             buried_threshold: 0.5,
             noise_sigmas: 3.0,
             floor: 0.0,
+            share_corners: default_share_corners(),
+            share_angle: default_share_angle(),
         }
     }
 }
 
 impl IrradianceMapSettings {
     /// The cap on orders actually used: `max_order` rounded down to a power of two and
-    /// clamped to 2..=[`MAX_ORDER_LIMIT`].
+    /// clamped to 1..=[`MAX_ORDER_LIMIT`].
     pub fn order_cap(&self) -> u32 {
-        let m = self.max_order.clamp(2, MAX_ORDER_LIMIT);
+        let m = self.max_order.clamp(1, MAX_ORDER_LIMIT);
         1 << (31 - m.leading_zeros())
     }
 
-    /// n_max = clamp(next_pow2(ceil(longest_edge · density)), 2, cap): the largest order of
-    /// a triangle whose longest edge is `longest_edge` metres.
+    /// n_max = clamp(next_pow2(ceil(longest_edge · density)), 1, cap): the largest order of
+    /// a triangle whose longest edge is `longest_edge` metres (1: its corners are at most
+    /// one sample spacing apart).
     pub fn max_order_for(&self, longest_edge: f32) -> u32 {
         let target = (longest_edge * self.density).ceil();
-        let target = if target.is_finite() && target > 2.0 {
+        let target = if target.is_finite() && target > 1.0 {
             (target.min(MAX_ORDER_LIMIT as f32) as u32).next_power_of_two()
         } else {
-            2
+            1
         };
-        target.clamp(2, self.order_cap())
+        target.clamp(1, self.order_cap())
     }
 }
 
@@ -306,16 +452,34 @@ struct Working {
     filled_error: Vec<Vec3>,
     /// Burial state ([`BURIED`] for buried samples, [`VALID`] otherwise).
     burial: Vec<u8>,
-    /// Order (log2) of each grid slot's first round; empty: order 2 everywhere.
+    /// Order (log2) of each grid slot's first round; empty: `min(2, n_max)` everywhere.
     start_log2: Vec<u8>,
     /// Grid slots whose punctual lights' shadow boundary crosses them
     /// ([`punctual_shadow_edges`]): they refine to their maximum order.
     shadow_edges: Vec<bool>,
+    /// Corner links: `links[3·slot + k]` is `3·slot' + k'` when corner k of grid `slot`
+    /// takes the estimate of corner k' of grid `slot'`, its representative, or
+    /// [`UNSHARED`]; empty when corners are not shared ([`corner_links`]).
+    links: Vec<u32>,
+    /// Per new grid sample of the current round, in [`for_each_new_sample`] order over
+    /// `pending`: the round point whose estimate it takes.
+    sources: Vec<u32>,
     /// Re-bakes: values of the maps before an edit, grid by grid, for the first round
     /// ([`SamplePoint::prior`]); `prior_offsets[g]` is grid slot g's first, or
     /// `u32::MAX` for a grid without one.
     priors: Vec<Vec3>,
     prior_offsets: Vec<u32>,
+}
+
+impl Working {
+    /// log2 of the order grid slot `g` starts at: a re-bake's prior order, else
+    /// `min(2, n_max)`.
+    fn start_log2(&self, g: usize) -> u8 {
+        match self.start_log2.get(g) {
+            Some(&l) => l,
+            None => (self.max_orders[g / 2] >= 2) as u8,
+        }
+    }
 }
 
 /// Grid slots (`2·triangle + side`, among those `bake` marks) that a hard shadow of a
@@ -371,8 +535,8 @@ pub fn punctual_shadow_edges(scene: &TracedScene, max_orders: &[u32], bake: &[bo
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IrradianceMaps {
     settings: IrradianceMapSettings,
-    /// log2 of the order of each grid slot `2·triangle + side`; 0: not baked.
-    log2_orders: Vec<u8>,
+    /// `log2(order) + 1` of each grid slot `2·triangle + side`; 0: not baked.
+    levels: Vec<u8>,
     /// First sample of each grid slot in `packed`.
     offsets: Vec<u32>,
     /// RGB9E5 samples, grid by grid, each in [`grid_index`] order.
@@ -390,7 +554,7 @@ pub struct IrradianceMaps {
 
 impl IrradianceMaps {
     /// Unbaked maps for `scene`: every front side, and the back sides `settings` asks
-    /// for, will start at order 2.
+    /// for, will start at order `min(2, n_max)`.
     pub fn new(scene: &TracedScene, settings: IrradianceMapSettings) -> Self {
         let triangles = scene.triangle_count();
         let max_orders: Vec<u32> = scene
@@ -410,9 +574,14 @@ impl IrradianceMaps {
             })
             .collect();
         let shadow_edges = punctual_shadow_edges(scene, &max_orders, &refine);
+        let links = if settings.share_corners {
+            corner_links(scene, settings.share_angle.to_radians().cos(), &refine)
+        } else {
+            Vec::new()
+        };
         Self {
             settings,
-            log2_orders: vec![0; 2 * triangles],
+            levels: vec![0; 2 * triangles],
             offsets: vec![0; 2 * triangles],
             packed: Vec::new(),
             sample_counts: Vec::new(),
@@ -423,6 +592,7 @@ impl IrradianceMaps {
                 max_orders,
                 refine,
                 shadow_edges,
+                links,
                 ..Default::default()
             })),
         }
@@ -440,10 +610,7 @@ impl IrradianceMaps {
 
     /// The current order of the grid on one side of `triangle` (0: not baked).
     pub fn order(&self, triangle: u32, front: bool) -> u32 {
-        match self.log2_orders[Self::slot(triangle, front)] {
-            0 => 0,
-            l => 1 << l,
-        }
+        order_of_level(self.levels[Self::slot(triangle, front)])
     }
 
     /// Stored sample (i, j) of the grid on one side of `triangle` (which must be baked).
@@ -565,17 +732,22 @@ impl SurfaceCache for IrradianceMaps {
             return;
         }
         let start = points.len();
+        let w = &mut **w;
+        w.sources.clear();
+        // Round point of each corner asked for in this round (only rounds that make
+        // grids have corners to share).
+        let mut corner_points = Vec::new();
         for &g in &w.pending {
             let (t, front) = (g / 2, g % 2 == 0);
-            let coarse = match self.log2_orders[g as usize] {
-                0 => 0,
-                l => 1u32 << l,
-            };
+            let coarse = order_of_level(self.levels[g as usize]);
             let n = if coarse == 0 {
-                1 << w.start_log2.get(g as usize).copied().unwrap_or(1)
+                1 << w.start_log2(g as usize)
             } else {
                 2 * coarse
             };
+            if coarse == 0 && !w.links.is_empty() && corner_points.is_empty() {
+                corner_points = vec![u32::MAX; w.links.len()];
+            }
             let key = scene.triangle_key(t);
             let inv = 1.0 / n as f32;
             let prior_base = match w.prior_offsets.get(g as usize) {
@@ -583,6 +755,19 @@ impl SurfaceCache for IrradianceMaps {
                 _ => None,
             };
             for_each_new_sample(coarse, n, |i, j, m| {
+                let corner = match (coarse, corner_of(i, j, n)) {
+                    (0, Some(k)) if !corner_points.is_empty() => Some(3 * g as usize + k),
+                    _ => None,
+                };
+                if let Some(c) = corner {
+                    let link = w.links[c];
+                    if link != UNSHARED && corner_points[link as usize] != u32::MAX {
+                        w.sources.push(corner_points[link as usize]);
+                        return;
+                    }
+                    corner_points[c] = (points.len() - start) as u32;
+                }
+                w.sources.push((points.len() - start) as u32);
                 points.push(SamplePoint {
                     site: SampleSite::Surface {
                         triangle: t,
@@ -611,18 +796,15 @@ impl SurfaceCache for IrradianceMaps {
             (w.pending_points, w.pending_points),
             "finish_round needs the estimates of the points next_round asked for"
         );
-        // New layout: pending grids double (fresh ones start at order 2).
-        let slots = self.log2_orders.len();
-        let mut new_log2 = self.log2_orders.clone();
+        // New layout: pending grids double (fresh ones start at their first order).
+        let slots = self.levels.len();
+        let mut new_log2 = self.levels.clone();
         for &g in &w.pending {
+            let first = w.start_log2(g as usize) + 1;
             let l = &mut new_log2[g as usize];
-            *l = if *l == 0 {
-                w.start_log2.get(g as usize).copied().unwrap_or(1)
-            } else {
-                *l + 1
-            };
+            *l = if *l == 0 { first } else { *l + 1 };
         }
-        let order_of = |l: u8| if l == 0 { 0 } else { 1u32 << l };
+        let order_of = order_of_level;
         let mut offsets = vec![0u32; slots];
         let mut total = 0usize;
         for g in 0..slots {
@@ -637,7 +819,7 @@ impl SurfaceCache for IrradianceMaps {
         let mut std_error = vec![Vec3::ZERO; total];
         let mut burial = vec![VALID; total];
         for g in 0..slots {
-            let (old, new) = (order_of(self.log2_orders[g]), order_of(new_log2[g]));
+            let (old, new) = (order_of(self.levels[g]), order_of(new_log2[g]));
             if old == 0 {
                 continue;
             }
@@ -666,10 +848,10 @@ impl SurfaceCache for IrradianceMaps {
         let mut next = 0usize;
         for &g in &w.pending {
             let n = order_of(new_log2[g as usize]);
-            let coarse = order_of(self.log2_orders[g as usize]);
+            let coarse = order_of(self.levels[g as usize]);
             let base = offsets[g as usize] as usize;
             for_each_new_sample(coarse, n, |_, _, m| {
-                let e = &estimates[next];
+                let e = &estimates[w.sources[next] as usize];
                 next += 1;
                 raw[base + m] = e.value;
                 samples[base + m] = e.samples;
@@ -679,10 +861,10 @@ impl SurfaceCache for IrradianceMaps {
                 } else {
                     VALID
                 };
-                self.totals.add(e);
             });
         }
-        self.log2_orders = new_log2;
+        estimates.iter().for_each(|e| self.totals.add(e));
+        self.levels = new_log2;
         self.offsets = offsets;
         w.raw = raw;
         w.samples = samples;
@@ -692,7 +874,7 @@ impl SurfaceCache for IrradianceMaps {
         w.filled = vec![Vec3::ZERO; total];
         w.filled_error = vec![Vec3::ZERO; total];
         for g in 0..slots {
-            let n = order_of(self.log2_orders[g]);
+            let n = order_of(self.levels[g]);
             if n > 0 {
                 Self::fill_grid(&mut w, self.offsets[g] as usize, n);
             }
@@ -702,18 +884,21 @@ impl SurfaceCache for IrradianceMaps {
         w.refine.iter_mut().for_each(|r| *r = false);
         let bound = self.settings.interpolation_error;
         for &g in &w.pending {
-            let n = order_of(self.log2_orders[g as usize]);
+            let n = order_of(self.levels[g as usize]);
             if n < w.max_orders[g as usize / 2] {
                 let base = self.offsets[g as usize] as usize;
                 let burial = &w.burial[base..base + grid_size(n)];
                 let mixed = burial.contains(&VALID) && burial.iter().any(|&b| b != VALID);
                 let shadow = w.shadow_edges.get(g as usize).copied().unwrap_or(false);
+                // An order-1 grid (a re-bake's prior) has no new samples to test: it
+                // doubles.
                 w.refine[g as usize] =
-                    mixed || shadow || self.interpolation_error(&w, base, n) > bound;
+                    n == 1 || mixed || shadow || self.interpolation_error(&w, base, n) > bound;
             }
         }
         w.pending.clear();
         w.pending_points = 0;
+        w.sources.clear();
         // Priors serve the first round only.
         w.priors = Vec::new();
         w.prior_offsets = Vec::new();
@@ -729,26 +914,26 @@ impl SurfaceCache for IrradianceMaps {
 
     fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
         let g = Self::slot(triangle, front);
-        let l = self.log2_orders[g];
-        if l == 0 {
+        let n = order_of_level(self.levels[g]);
+        if n == 0 {
             return Vec3::ZERO;
         }
         let base = self.offsets[g] as usize;
-        let packed = &self.packed[base..base + grid_size(1 << l)];
-        grid_interpolate(1 << l, uv, |i, j| {
-            self.scale.unpack(packed[grid_index(i, j)])
-        })
+        let packed = &self.packed[base..base + grid_size(n)];
+        grid_interpolate(n, uv, |i, j| self.scale.unpack(packed[grid_index(i, j)]))
     }
 
     /// Every grid of a surviving triangle starts at its order before the edit, all its
     /// samples asked for again with their values as priors (buried ones with the values
     /// filled in from their neighbours: the re-bake finds them buried again and refills
-    /// them); grids of new triangles start afresh at order 2. Refinement then continues
+    /// them); grids of new triangles start afresh at order `min(2, n_max)`. Refinement then continues
     /// as in a full bake, so a grid the edit gave new detail (a shadow edge) doubles.
     fn remap(&self, _old: &TracedScene, new: &TracedScene, triangle_map: &[u32]) -> Self {
         let mut fresh = Self::new(new, self.settings);
-        let slots = fresh.log2_orders.len();
-        let mut start_log2 = vec![1u8; slots];
+        let slots = fresh.levels.len();
+        let mut start_log2: Vec<u8> = (0..slots)
+            .map(|g| fresh.working.as_ref().map_or(1, |w| w.start_log2(g)))
+            .collect();
         let mut prior_offsets = vec![u32::MAX; slots];
         let mut priors = Vec::new();
         for g in 0..slots {
@@ -799,13 +984,13 @@ impl SurfaceCache for IrradianceMaps {
 
     fn stats(&self) -> CacheStats {
         let mut order_histogram = BTreeMap::new();
-        for &l in &self.log2_orders {
+        for &l in &self.levels {
             if l > 0 {
-                *order_histogram.entry(1u32 << l).or_insert(0) += 1;
+                *order_histogram.entry(order_of_level(l)).or_insert(0) += 1;
             }
         }
         CacheStats {
-            cache_bytes: 4 * self.packed.len() as u64 + 5 * self.log2_orders.len() as u64 + 4,
+            cache_bytes: 4 * self.packed.len() as u64 + 5 * self.levels.len() as u64 + 4,
             order_histogram,
             buried: self.buried,
             ..self.totals.stats()

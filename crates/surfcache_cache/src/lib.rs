@@ -236,6 +236,14 @@ impl CacheSettings {
         }
     }
 
+    /// Whether irradiance maps estimate a corner once for all triangles that may share it
+    /// ([`irradiance_map`] module docs, Shared corners; ignored by the other caches).
+    pub fn set_share_corners(&mut self, share: bool) {
+        if let Self::IrradianceMap(s) = self {
+            s.share_corners = share;
+        }
+    }
+
     /// Spatial density: irradiance-map samples per metre, lightmap texels per metre
     /// (vertex lighting has none; ignored).
     pub fn set_density(&mut self, density: f32) {

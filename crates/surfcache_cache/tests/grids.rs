@@ -100,7 +100,9 @@ fn max_order_follows_density_and_cap() {
         ..Default::default()
     };
     assert_eq!(s.order_cap(), 32);
-    assert_eq!(s.max_order_for(0.01), 2);
+    assert_eq!(s.max_order_for(0.01), 1); // corners 0.1 sample spacings apart
+    assert_eq!(s.max_order_for(0.1), 1);
+    assert_eq!(s.max_order_for(0.15), 2);
     assert_eq!(s.max_order_for(0.25), 4); // ceil(2.5) = 3 → 4
     assert_eq!(s.max_order_for(0.8), 8);
     assert_eq!(s.max_order_for(1.6), 16);
@@ -141,6 +143,56 @@ fn unit_floor() -> Scene {
         )],
         ..Default::default()
     }
+}
+
+/// A triangle no longer than one sample spacing keeps its three corners: one round, three
+/// points per grid, stored and looked up like any other grid (exact for a linear E).
+#[test]
+fn triangles_within_one_sample_spacing_keep_order_one_grids() {
+    let traced = TracedScene::new(&unit_floor()).unwrap();
+    let f = |p: Vec3| Vec3::new(1.0 + p.x, 2.0 - p.z, 0.5 + p.x * p.z.min(0.0));
+    let settings = IrradianceMapSettings {
+        density: 0.5, // longest edge √2 m · 0.5/m ≤ 1
+        both_sides: true,
+        ..Default::default()
+    };
+    let maps = IrradianceMaps::new(&traced, settings);
+    let (maps, rounds) = bake_synthetic(&traced, maps, |sp| (f(sp.position), 0.0));
+    assert_eq!(rounds.len(), 1, "order-1 grids cannot refine");
+    assert_eq!(
+        rounds[0].len(),
+        2 * 4,
+        "2 sides × 4 vertices (the diagonal's corners are shared)"
+    );
+    let stats = maps.stats();
+    assert_eq!(stats.order_histogram.get(&1), Some(&4));
+    assert_eq!(stats.cache_bytes, 4 * 12 + 5 * 4 + 4);
+    let mut rng = Points(9);
+    for t in 0..2u32 {
+        let [a, b, c] = traced.positions[t as usize];
+        for front in [true, false] {
+            assert_eq!(maps.order(t, front), 1);
+            for _ in 0..50 {
+                let uv = rng.barycentrics();
+                let p = a * (1.0 - uv.x - uv.y) + b * uv.x + c * uv.y;
+                let got = maps.lookup(t, uv, front);
+                assert!((got - f(p)).abs().max_element() < 0.02, "{got} vs {}", f(p));
+            }
+        }
+    }
+    // One sample spacing more and the same floor starts at order 2 again.
+    let settings = IrradianceMapSettings {
+        density: 1.0,
+        ..settings
+    };
+    let maps = IrradianceMaps::new(&traced, settings);
+    let (maps, rounds) = bake_synthetic(&traced, maps, |sp| (f(sp.position), 0.0));
+    assert_eq!(
+        rounds[0].len(),
+        2 * (2 * 6 - 2),
+        "2 sides × (2 grids of 6 − 2 shared)"
+    );
+    assert_eq!(maps.stats().order_histogram.get(&2), Some(&4));
 }
 
 #[test]
@@ -231,9 +283,10 @@ fn refinement_keeps_every_sample_and_asks_only_for_new_ones() {
     let stats = maps.stats();
     assert_eq!(stats.order_histogram.values().sum::<u64>(), 2);
     assert_eq!(stats.order_histogram.keys().max(), Some(&16));
-    // Every estimate was kept: as many points as the final grids hold.
+    // Every estimate was kept: as many points as the final grids hold, less the two
+    // corners on the diagonal that both grids share.
     let held: usize = (0..2).map(|t| grid_size(maps.order(t, true))).sum();
-    assert_eq!(stats.sample_points as usize, held);
+    assert_eq!(stats.sample_points as usize, held - 2);
     assert_eq!(
         stats.cache_bytes,
         4 * held as u64 + 5 * 4 + 4,
@@ -388,4 +441,169 @@ fn vertex_lighting_estimates_each_mesh_vertex_once_per_side() {
             );
         }
     }
+}
+
+/// A welded mesh from corner positions and quads (corner indices, counter-clockwise seen
+/// from the side `facing` points to): vertices are shared between the quads.
+fn welded(name: &str, positions: Vec<Vec3>, quads: &[([u32; 4], Vec3)]) -> Mesh {
+    let mut indices = Vec::new();
+    for &([a, b, c, d], facing) in quads {
+        let p = |i: u32| positions[i as usize];
+        let n = (p(b) - p(a)).cross(p(c) - p(a));
+        if n.dot(facing) >= 0.0 {
+            indices.extend([[a, b, c], [a, c, d]]);
+        } else {
+            indices.extend([[a, c, b], [a, d, c]]);
+        }
+    }
+    Mesh::new(name, positions, indices)
+}
+
+/// An `nx` × `nz` grid of 1 m cells on y = 0, facing up, vertices shared.
+fn floor_grid(nx: u32, nz: u32) -> Mesh {
+    let mut positions = Vec::new();
+    for z in 0..=nz {
+        for x in 0..=nx {
+            positions.push(Vec3::new(x as f32, 0.0, z as f32));
+        }
+    }
+    let at = |x: u32, z: u32| z * (nx + 1) + x;
+    let quads: Vec<_> = (0..nz)
+        .flat_map(|z| (0..nx).map(move |x| (x, z)))
+        .map(|(x, z)| {
+            (
+                [at(x, z), at(x + 1, z), at(x + 1, z + 1), at(x, z + 1)],
+                Vec3::Y,
+            )
+        })
+        .collect();
+    welded("floor", positions, &quads)
+}
+
+/// Bakes order-1 maps (front sides) of `scene` with synthetic estimates that name the
+/// triangle a point was estimated on; returns the maps, the round-0 point count and the
+/// traced scene.
+fn bake_corners(scene: &Scene, share_corners: bool) -> (IrradianceMaps, usize, TracedScene) {
+    let traced = TracedScene::new(scene).unwrap();
+    let settings = IrradianceMapSettings {
+        density: 0.1, // every triangle within one sample spacing: order 1
+        both_sides: false,
+        share_corners,
+        ..Default::default()
+    };
+    let maps = IrradianceMaps::new(&traced, settings);
+    let (maps, rounds) = bake_synthetic(&traced, maps, |sp| {
+        (Vec3::splat(1.0 + sp.triangle as f32), 0.0)
+    });
+    assert_eq!(rounds.len(), 1);
+    (maps, rounds[0].len(), traced)
+}
+
+/// The corner values of every triangle at each position (front sides).
+fn corner_values(maps: &IrradianceMaps, traced: &TracedScene) -> Vec<(Vec3, Vec3)> {
+    let mut out = Vec::new();
+    for t in 0..traced.triangle_count() as u32 {
+        for (k, (i, j)) in [(0, 0), (1, 0), (0, 1)].into_iter().enumerate() {
+            out.push((traced.positions[t as usize][k], maps.sample(t, true, i, j)));
+        }
+    }
+    out
+}
+
+/// Shared corners (the thesis' outlook): coplanar triangles around a vertex take one
+/// estimate, so a tessellated floor costs one point per vertex and every grid shows the
+/// same value at a shared vertex; without sharing each triangle estimates its own.
+#[test]
+fn coplanar_triangles_share_their_corners() {
+    let scene = Scene {
+        instances: vec![Instance::new(floor_grid(4, 3), Material::default())],
+        ..Default::default()
+    };
+    let (maps, points, traced) = bake_corners(&scene, true);
+    assert_eq!(points, 5 * 4, "one point per vertex");
+    assert_eq!(maps.stats().sample_points, 20);
+    assert_eq!(
+        maps.stats().cache_bytes,
+        4 * 3 * 24 + 5 * 48 + 4,
+        "every grid stores its copies"
+    );
+    let values = corner_values(&maps, &traced);
+    for (p, v) in &values {
+        for (q, w) in &values {
+            if p == q {
+                assert_eq!(v, w, "corner at {p} differs between triangles");
+            }
+        }
+    }
+    let (maps, points, traced) = bake_corners(&scene, false);
+    assert_eq!(points, 3 * 24);
+    let values = corner_values(&maps, &traced);
+    assert!(
+        values
+            .iter()
+            .any(|(p, v)| values.iter().any(|(q, w)| p == q && v != w)),
+        "without sharing, corners are the triangles' own"
+    );
+}
+
+/// What may not share: triangles 90° apart around a welded crease (their estimates would
+/// clip different hemispheres), and triangles on two sides of a wall of another instance
+/// standing on their shared vertices (their ray origins, a step inside each triangle, see
+/// different rooms).
+#[test]
+fn creases_and_walls_keep_corners_apart() {
+    // An L: floor x ∈ [0, 1], a wall up from x = 1, welded along the crease.
+    let v = Vec3::new;
+    let positions = vec![
+        v(0., 0., 0.),
+        v(1., 0., 0.),
+        v(1., 1., 0.),
+        v(0., 0., 1.),
+        v(1., 0., 1.),
+        v(1., 1., 1.),
+    ];
+    let l = welded(
+        "l",
+        positions,
+        &[([0, 1, 4, 3], Vec3::Y), ([1, 2, 5, 4], Vec3::NEG_X)],
+    );
+    let scene = Scene {
+        instances: vec![Instance::new(l, Material::default())],
+        ..Default::default()
+    };
+    let (_, points, _) = bake_corners(&scene, true);
+    assert_eq!(points, 6 + 2, "the crease's two vertices once per face");
+
+    // A 2 × 1 floor with a wall of another instance standing on its middle vertex row.
+    let wall = quad(
+        "wall",
+        [v(1., 0., -1.), v(1., 1., -1.), v(1., 1., 2.), v(1., 0., 2.)],
+        Vec3::X,
+    );
+    let open = Scene {
+        instances: vec![Instance::new(floor_grid(2, 1), Material::default())],
+        ..Default::default()
+    };
+    let (_, points, _) = bake_corners(&open, true);
+    assert_eq!(points, 6);
+    let mut walled = open.clone();
+    walled
+        .instances
+        .push(Instance::new(wall, Material::default()));
+    let (maps, points, traced) = bake_corners(&walled, true);
+    // 6 floor vertices, the middle row's 2 once per side, and the wall's 2 triangles
+    // (4 vertices, shared between them).
+    assert_eq!(points, 6 + 2 + 4);
+    // The floor's grids left and right of the wall keep different corner values there.
+    let floor = traced.instance_triangles[0].clone();
+    let values: Vec<_> = corner_values(&maps, &traced)
+        .into_iter()
+        .filter(|(p, _)| p.x == 1.0 && p.y == 0.0)
+        .collect();
+    assert!(floor.len() == 4 && values.len() >= 4);
+    assert!(
+        values
+            .iter()
+            .any(|(p, v)| values.iter().any(|(q, w)| p == q && v != w))
+    );
 }

@@ -48,6 +48,8 @@ pub struct BakeOptions {
     pub interpolation_error: Option<f32>,
     pub gather: u32,
     pub both_sides: bool,
+    /// Irradiance maps: estimate shared corners once (`--no-share-corners` turns it off).
+    pub share_corners: bool,
 }
 
 impl BakeOptions {
@@ -69,6 +71,7 @@ impl BakeOptions {
         }
         let mut cache = CacheSettings::for_method(self.method);
         cache.set_both_sides(self.both_sides);
+        cache.set_share_corners(self.share_corners);
         if let Some(d) = self.density {
             if !(d.is_finite() && d > 0.0) {
                 bail!("--density must be a positive number");

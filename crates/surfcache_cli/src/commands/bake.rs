@@ -69,6 +69,10 @@ pub struct BakeArgs {
     /// Which sides of the surfaces to bake: both, or front (counter-clockwise) only.
     #[arg(long, default_value = "both")]
     sides: String,
+    /// Irradiance maps: estimate every triangle's corners on its own instead of once for
+    /// the triangles around a vertex that may share them.
+    #[arg(long)]
+    no_share_corners: bool,
     /// Output directory (created; replaced if it holds an earlier bake).
     #[arg(short = 'o', long = "out")]
     out: PathBuf,
@@ -97,6 +101,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         interpolation_error: args.interpolation_error,
         gather: args.gather,
         both_sides,
+        share_corners: !args.no_share_corners,
     };
     let settings = options.settings()?;
     let (min_samples, max_samples) = (

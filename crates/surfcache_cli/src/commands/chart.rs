@@ -454,6 +454,7 @@ pub fn run(args: ChartArgs) -> Result<()> {
                         interpolation_error: None,
                         gather: spec.gather,
                         both_sides: spec.both_sides,
+                        share_corners: true,
                     };
                     let elapsed_at_start = sweep_start.elapsed();
                     let reached = std::sync::Mutex::new(JobProgress::default());
