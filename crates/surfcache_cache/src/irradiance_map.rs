@@ -6,8 +6,8 @@
 //! Lookup interpolates linearly inside the grid cell that holds `(u, v)`
 //! ([`grid_interpolate`]) and never crosses into another triangle.
 //!
-//! **Generator.** Round 0 asks for every grid at order `min(2, n_max)`. After each round, every grid
-//! that just doubled compares each *new* sample (one with an odd index coordinate) with
+//! **Generator.** Round 0 asks for every grid at order `min(2, n_max)`. After each round,
+//! every grid that just doubled compares each *new* sample (one with an odd index coordinate) with
 //! the linear interpolation of the coarse grid there: the mean of the two coarse samples
 //! at the ends of the coarse edge it halves ([`coarse_neighbours`]). It doubles again
 //! while the largest difference exceeds
@@ -62,9 +62,10 @@
 //! asks for one point per distinct site and [`SurfaceCache::finish_round`] copies its
 //! estimate into every grid that uses it ([`CacheStats::sample_points`] counts points,
 //! `cache_bytes` stored copies). On a finely tessellated mesh whose triangles keep
-//! order-1 grids (Sponza at a coarse density) the maps then cost about one point per
-//! vertex, like vertex lighting, while larger triangles still refine. Edges are not
-//! shared: their samples are estimated once per adjacent grid.
+//! order-1 grids (Sponza at 1 sample/m) this halves the points: 990k → 520k, against
+//! 213k vertices for vertex lighting, the rest being corners on creases and the larger
+//! triangles' refinement. Edges are not shared: their samples are estimated once per
+//! adjacent grid.
 //!
 //! **Buried samples.** An estimate whose `back_face_share` exceeds
 //! [`IrradianceMapSettings::buried_threshold`] lies inside other geometry (a floor under
