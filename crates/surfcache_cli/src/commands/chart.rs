@@ -43,7 +43,11 @@ pub struct ChartArgs {
     #[arg(long, value_delimiter = ',')]
     sponza_bounds: Option<Vec<f32>>,
     /// Hemisphere samplers (uniform, cosine, qmc, mis, best), baked in this order.
-    #[arg(long, value_delimiter = ',', default_value = "best,uniform,cosine")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "best,uniform,cosine,qmc,mis"
+    )]
     samplers: Vec<String>,
     /// Methods (vertex, irradiance-map, lightmap).
     #[arg(
