@@ -799,19 +799,18 @@ impl SurfaceCache for IrradianceMaps {
         );
         // New layout: pending grids double (fresh ones start at their first order).
         let slots = self.levels.len();
-        let mut new_log2 = self.levels.clone();
+        let mut new_levels = self.levels.clone();
         for &g in &w.pending {
             let first = w.start_log2(g as usize) + 1;
-            let l = &mut new_log2[g as usize];
+            let l = &mut new_levels[g as usize];
             *l = if *l == 0 { first } else { *l + 1 };
         }
-        let order_of = order_of_level;
         let mut offsets = vec![0u32; slots];
         let mut total = 0usize;
         for g in 0..slots {
             offsets[g] = total as u32;
-            if new_log2[g] > 0 {
-                total += grid_size(order_of(new_log2[g]));
+            if new_levels[g] > 0 {
+                total += grid_size(order_of_level(new_levels[g]));
             }
         }
         // Move the old samples to their places in the doubled grids.
@@ -820,7 +819,10 @@ impl SurfaceCache for IrradianceMaps {
         let mut std_error = vec![Vec3::ZERO; total];
         let mut burial = vec![VALID; total];
         for g in 0..slots {
-            let (old, new) = (order_of(self.levels[g]), order_of(new_log2[g]));
+            let (old, new) = (
+                order_of_level(self.levels[g]),
+                order_of_level(new_levels[g]),
+            );
             if old == 0 {
                 continue;
             }
@@ -848,8 +850,8 @@ impl SurfaceCache for IrradianceMaps {
         let threshold = self.settings.buried_threshold;
         let mut next = 0usize;
         for &g in &w.pending {
-            let n = order_of(new_log2[g as usize]);
-            let coarse = order_of(self.levels[g as usize]);
+            let n = order_of_level(new_levels[g as usize]);
+            let coarse = order_of_level(self.levels[g as usize]);
             let base = offsets[g as usize] as usize;
             for_each_new_sample(coarse, n, |_, _, m| {
                 let e = &estimates[w.sources[next] as usize];
@@ -865,7 +867,7 @@ impl SurfaceCache for IrradianceMaps {
             });
         }
         estimates.iter().for_each(|e| self.totals.add(e));
-        self.levels = new_log2;
+        self.levels = new_levels;
         self.offsets = offsets;
         w.raw = raw;
         w.samples = samples;
@@ -875,7 +877,7 @@ impl SurfaceCache for IrradianceMaps {
         w.filled = vec![Vec3::ZERO; total];
         w.filled_error = vec![Vec3::ZERO; total];
         for g in 0..slots {
-            let n = order_of(self.levels[g]);
+            let n = order_of_level(self.levels[g]);
             if n > 0 {
                 Self::fill_grid(&mut w, self.offsets[g] as usize, n);
             }
@@ -885,7 +887,7 @@ impl SurfaceCache for IrradianceMaps {
         w.refine.iter_mut().for_each(|r| *r = false);
         let bound = self.settings.interpolation_error;
         for &g in &w.pending {
-            let n = order_of(self.levels[g as usize]);
+            let n = order_of_level(self.levels[g as usize]);
             if n < w.max_orders[g as usize / 2] {
                 let base = self.offsets[g as usize] as usize;
                 let burial = &w.burial[base..base + grid_size(n)];
