@@ -920,7 +920,9 @@ impl SurfaceCache for IrradianceMaps {
                 let base = self.offsets[g as usize] as usize;
                 let burial = &w.burial[base..base + grid_size(n)];
                 let mixed = burial.contains(&VALID) && burial.iter().any(|&b| b != VALID);
-                let shadow = w.shadow_edges.get(g as usize).copied().unwrap_or(false);
+                // A grid buried all over needs no detail, whatever crosses it.
+                let shadow = w.shadow_edges.get(g as usize).copied().unwrap_or(false)
+                    && burial.contains(&VALID);
                 // An order-1 grid (a re-bake's prior) has no new samples to test: it
                 // doubles.
                 w.refine[g as usize] =
