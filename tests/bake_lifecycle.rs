@@ -124,27 +124,21 @@ fn staging_dirs(dir: &Path, name: &str) -> Vec<String> {
     names
 }
 
-/// Every file under `dir` (relative path → bytes), sorted.
-fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for entry in std::fs::read_dir(&d).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else {
-                let rel = path
-                    .strip_prefix(dir)
-                    .unwrap()
-                    .to_string_lossy()
-                    .into_owned();
-                out.push((rel, std::fs::read(&path).unwrap()));
-            }
-        }
-    }
-    out.sort();
-    out
+/// What a bake wrote to `out`: its files (path → bytes), sorted.
+fn output(out: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(out.join("lightmaps"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    paths.extend(["report.json", "cache.bin", "scene.gltf"].map(|f| out.join(f)));
+    paths.sort();
+    paths
+        .into_iter()
+        .map(|p| {
+            let bytes = std::fs::read(&p).unwrap();
+            (p, bytes)
+        })
+        .collect()
 }
 
 /// `surfcache query OUT POINTS` succeeds; returns its stdout.
@@ -171,21 +165,46 @@ fn points_csv(dir: &Path) -> PathBuf {
     path
 }
 
-#[test]
-fn killed_bake_keeps_the_output_and_the_next_bake_cleans_up() {
-    let dir = temp_dir("killed");
+/// A test's directory holding a finished bake `out` and `points.csv`.
+struct Earlier {
+    dir: PathBuf,
+    points: PathBuf,
+    out: PathBuf,
+    /// Its files and what `query` answered at the points.
+    files: Vec<(PathBuf, Vec<u8>)>,
+    answers: String,
+}
+
+fn earlier_bake(test: &str) -> Earlier {
+    let dir = temp_dir(test);
     let points = points_csv(&dir);
     let out = dir.join("out");
     fast_bake(&out);
-    let before = files(&out);
-    let answers = query(&out, &points);
+    Earlier {
+        files: output(&out),
+        answers: query(&out, &points),
+        dir,
+        points,
+        out,
+    }
+}
+
+#[test]
+fn killed_bake_keeps_the_output_and_the_next_bake_cleans_up() {
+    let Earlier {
+        dir,
+        points,
+        out,
+        files: before,
+        answers,
+    } = earlier_bake("killed");
 
     let child = start_slow_bake(&out);
     let pid = child.id();
     kill(child);
     // What the kill left: the staging directory beside the untouched output.
     assert_eq!(staging_dirs(&dir, "out"), [format!(".out.partial-{pid}")]);
-    assert!(files(&out) == before, "the earlier output changed");
+    assert!(output(&out) == before, "the earlier output changed");
     assert_eq!(query(&out, &points), answers);
 
     fast_bake(&out);
@@ -240,12 +259,13 @@ fn running_bakes_keep_their_staging_directory() {
 
 #[test]
 fn output_moved_aside_by_a_killed_commit_is_put_back() {
-    let dir = temp_dir("moved_aside");
-    let points = points_csv(&dir);
-    let out = dir.join("out");
-    fast_bake(&out);
-    let answers = query(&out, &points);
-    let before = files(&out);
+    let Earlier {
+        dir,
+        points,
+        out,
+        files: before,
+        answers,
+    } = earlier_bake("moved_aside");
     // A bake killed between its commit's two renames: the earlier output moved aside, its
     // own finished staging directory not yet in place.
     let pid = 99999999;
@@ -259,7 +279,10 @@ fn output_moved_aside_by_a_killed_commit_is_put_back() {
         .output()
         .unwrap();
     assert!(!run.status.success());
-    assert!(files(&out) == before, "the earlier output was not put back");
+    assert!(
+        output(&out) == before,
+        "the earlier output was not put back"
+    );
     assert_eq!(query(&out, &points), answers);
     assert_eq!(staging_dirs(&dir, "out"), Vec::<String>::new());
 }
