@@ -191,28 +191,23 @@ fn earlier_bake(test: &str) -> Earlier {
 
 #[test]
 fn killed_bake_keeps_the_output_and_the_next_bake_cleans_up() {
-    let Earlier {
-        dir,
-        points,
-        out,
-        files: before,
-        answers,
-    } = earlier_bake("killed");
+    let earlier = earlier_bake("killed");
+    let (dir, points, out) = (&earlier.dir, &earlier.points, &earlier.out);
 
-    let child = start_slow_bake(&out);
+    let child = start_slow_bake(out);
     let pid = child.id();
     kill(child);
     // What the kill left: the staging directory beside the untouched output.
-    assert_eq!(staging_dirs(&dir, "out"), [format!(".out.partial-{pid}")]);
-    assert!(output(&out) == before, "the earlier output changed");
-    assert_eq!(query(&out, &points), answers);
+    assert_eq!(staging_dirs(dir, "out"), [format!(".out.partial-{pid}")]);
+    assert!(output(out) == earlier.files, "the earlier output changed");
+    assert_eq!(query(out, points), earlier.answers);
 
-    fast_bake(&out);
-    assert_eq!(staging_dirs(&dir, "out"), Vec::<String>::new());
-    let entries: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+    fast_bake(out);
+    assert_eq!(staging_dirs(dir, "out"), Vec::<String>::new());
+    let entries: Vec<_> = std::fs::read_dir(dir).unwrap().collect();
     assert_eq!(entries.len(), 2, "{entries:?}");
     // Same seed, same settings: the same bake as before.
-    assert_eq!(query(&out, &points), answers);
+    assert_eq!(query(out, points), earlier.answers);
 }
 
 #[test]
@@ -259,32 +254,27 @@ fn running_bakes_keep_their_staging_directory() {
 
 #[test]
 fn output_moved_aside_by_a_killed_commit_is_put_back() {
-    let Earlier {
-        dir,
-        points,
-        out,
-        files: before,
-        answers,
-    } = earlier_bake("moved_aside");
+    let earlier = earlier_bake("moved_aside");
+    let (dir, points, out) = (&earlier.dir, &earlier.points, &earlier.out);
     // A bake killed between its commit's two renames: the earlier output moved aside, its
     // own finished staging directory not yet in place.
     let pid = 99999999;
-    std::fs::rename(&out, dir.join(format!(".out.partial-{pid}.old"))).unwrap();
+    std::fs::rename(out, dir.join(format!(".out.partial-{pid}.old"))).unwrap();
     std::fs::create_dir_all(dir.join(format!(".out.partial-{pid}")).join("lightmaps")).unwrap();
 
     // A bake that fails (its scene does not exist) after preparing the output.
     let run = Command::new(SURFCACHE)
         .args(["bake", "missing.gltf", "-o"])
-        .arg(&out)
+        .arg(out)
         .output()
         .unwrap();
     assert!(!run.status.success());
     assert!(
-        output(&out) == before,
+        output(out) == earlier.files,
         "the earlier output was not put back"
     );
-    assert_eq!(query(&out, &points), answers);
-    assert_eq!(staging_dirs(&dir, "out"), Vec::<String>::new());
+    assert_eq!(query(out, points), earlier.answers);
+    assert_eq!(staging_dirs(dir, "out"), Vec::<String>::new());
 }
 
 #[test]
