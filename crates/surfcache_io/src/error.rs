@@ -232,3 +232,33 @@ pub(crate) fn no_panic<T>(what: &str, f: impl FnOnce() -> T) -> Result<T, String
         format!("{what} failed on malformed data ({msg})")
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::Untrusted;
+
+    #[test]
+    fn escapes_what_is_not_printable_once_and_cuts_between_escapes() {
+        let raw = "a\u{1b}[2J\r\n\t\0\u{7f}\u{85}\u{9b}\u{202e}\u{2028}\u{feff}é 漢 '\"\\";
+        let shown = Untrusted::text(raw).to_string();
+        assert_eq!(
+            shown,
+            r#"a\u{1b}[2J\r\n\t\0\u{7f}\u{85}\u{9b}\u{202e}\u{2028}\u{feff}é 漢 '"\"#
+        );
+        // Escaping what is already escaped changes nothing.
+        assert_eq!(Untrusted::text(&shown).to_string(), shown);
+        // Bytes that are not UTF-8, a cut sequence among them.
+        assert_eq!(
+            Untrusted::bytes(b"R\xff\xe2\x80.G").to_string(),
+            r"R\xff\xe2\x80.G"
+        );
+        // A cut never splits an escape: `\u{1b}` does not fit in the last 3 characters.
+        let long = format!("{}\u{1b}", "x".repeat(Untrusted::NAME_CHARS - 3));
+        let cut = Untrusted::name(&long).to_string();
+        assert_eq!(cut, format!("{}…", "x".repeat(Untrusted::NAME_CHARS - 3)));
+        let exact = "x".repeat(Untrusted::NAME_CHARS);
+        assert_eq!(Untrusted::name(&exact).to_string(), exact);
+        let path = std::path::Path::new("dir/a\nb.exr");
+        assert_eq!(Untrusted::path(path).to_string(), r"dir/a\nb.exr");
+    }
+}
