@@ -11,27 +11,14 @@
 //! - With stderr not a terminal (a pipe here, a log in practice), a bake prints plain
 //!   progress lines (pass, share done, rays per second, time left) and no bar.
 
+mod common;
+
+use common::{CORNELL_FAST, expect_success};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 
 const SURFCACHE: &str = env!("CARGO_BIN_EXE_surfcache");
-
-/// A few seconds of Cornell box on two threads.
-const FAST: [&str; 12] = [
-    "--max-rel-error",
-    "0.1",
-    "--density",
-    "8",
-    "--gather",
-    "0",
-    "--min-samples",
-    "64",
-    "--max-samples",
-    "4096",
-    "--threads",
-    "2",
-];
 
 /// A Cornell bake that runs far longer than a test waits (it is killed).
 const SLOW: [&str; 6] = [
@@ -63,18 +50,8 @@ fn bake_command(out: &Path, options: &[&str]) -> Command {
     command
 }
 
-#[track_caller]
-fn expect_success(out: &Output, what: &str) {
-    assert!(
-        out.status.success(),
-        "{what} failed: {:?}\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
 fn fast_bake(out: &Path) {
-    let run = bake_command(out, &FAST).output().unwrap();
+    let run = bake_command(out, &CORNELL_FAST).output().unwrap();
     expect_success(&run, "bake");
 }
 
@@ -281,7 +258,7 @@ fn output_moved_aside_by_a_killed_commit_is_put_back() {
 fn piped_bake_prints_progress_lines() {
     let dir = temp_dir("progress");
     let out = dir.join("out");
-    let run = bake_command(&out, &FAST)
+    let run = bake_command(&out, &CORNELL_FAST)
         .env("SURFCACHE_PROGRESS_SECONDS", "0.05")
         .output()
         .unwrap();
