@@ -138,8 +138,10 @@ impl Progress {
         }
     }
 
-    /// Shows `status` (a line is printed only when its interval has passed).
-    fn show(&mut self, status: &BakeStatus) {
+    /// Shows `status`, `elapsed` after the bake began (a line is printed only when its
+    /// interval has passed). `elapsed` is the wall clock, since `status` is only refreshed
+    /// when a step of the job returns.
+    fn show(&mut self, status: &BakeStatus, elapsed: Duration) {
         let p = &status.job;
         let eta = status
             .eta_seconds
@@ -170,7 +172,7 @@ impl Progress {
                     p.passes.max(1),
                     100.0 * status.fraction,
                     status.rays_per_second / 1e6,
-                    status.seconds,
+                    elapsed.as_secs_f64(),
                 );
             }
         }
@@ -223,7 +225,7 @@ pub fn bake(
             if stop(start.elapsed(), &status.job) {
                 return false;
             }
-            progress.show(status);
+            progress.show(status, start.elapsed());
             true
         },
     );
