@@ -16,7 +16,7 @@ mod common;
 use common::{CORNELL_FAST, expect_success};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, Stdio};
 
 const SURFCACHE: &str = env!("CARGO_BIN_EXE_surfcache");
 
