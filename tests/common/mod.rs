@@ -138,9 +138,8 @@ pub fn sky_minus_blockers(x: Vec3, n: Vec3, blockers: &[Vec<Vec3>], radiance: f3
         .sum();
     PI * radiance - blocked
 
-/// Small settings that keep a Cornell bake to about a second: no gathering pre-pass
-/// (whose fixed 32-per-metre maps would take most of the time), a 10 % bound, 8 samples
-/// per metre, two threads.
+/// Small settings that keep a Cornell bake to about a second: no bounce passes (full
+/// paths), a 10 % bound, 8 samples per metre, two threads.
 pub const CORNELL_FAST: [&str; 12] = [
     "--max-rel-error",
     "0.1",
