@@ -1,7 +1,8 @@
 //! The BVH against brute force: random rays, grazing rays and rays leaving surfaces must
 //! find the same closest hit (distance and triangle) as testing every triangle in f64, and
-//! the any-hit query must agree with it. Rays whose brute-force answer lies within a
-//! relative 1e-4 of a triangle edge are skipped: either answer is right there.
+//! the any-hit query must agree with it, at every SIMD level the CPU supports (each forced
+//! in turn). Rays whose brute-force answer lies within a relative 1e-4 of a triangle edge
+//! are skipped: either answer is right there.
 
 use surfcache::core::{
     geometry::to_world,
@@ -9,11 +10,22 @@ use surfcache::core::{
     sampling::{Rng, cosine_hemisphere, uniform_sphere},
     scenes,
 };
-use surfcache::trace::{Bvh, TracedScene};
+use surfcache::trace::{Bvh, SimdLevel, TracedScene};
 
 /// Closest hit by testing every triangle in f64: (t, triangle, edge margin), where the
 /// margin is the smallest barycentric of the hit (negative distance outside for near misses).
 fn brute_force(tris: &[[Vec3; 3]], o: Vec3, d: Vec3, tmax: f64) -> (Option<(f64, usize)>, f64) {
+    brute_force_from(tris, o, d, 0.0, tmax)
+}
+
+/// [`brute_force`] for `t ∈ (tmin, tmax]`.
+fn brute_force_from(
+    tris: &[[Vec3; 3]],
+    o: Vec3,
+    d: Vec3,
+    tmin: f64,
+    tmax: f64,
+) -> (Option<(f64, usize)>, f64) {
     let (o, d) = (o.as_dvec3(), d.as_dvec3());
     let mut best: Option<(f64, usize)> = None;
     let mut margin = f64::INFINITY; // distance of the answer from being ambiguous
@@ -32,7 +44,7 @@ fn brute_force(tris: &[[Vec3; 3]], o: Vec3, d: Vec3, tmax: f64) -> (Option<(f64,
         let t = e2.dot(q) / det;
         let w = 1.0 - u - v;
         let m = u.min(v).min(w);
-        if t > 0.0 && t <= tmax {
+        if t > tmin && t <= tmax {
             if m.abs() < margin && best.is_none_or(|(bt, _)| t < bt * (1.0 + 1e-4)) {
                 margin = margin.min(m.abs());
             }
@@ -44,7 +56,42 @@ fn brute_force(tris: &[[Vec3; 3]], o: Vec3, d: Vec3, tmax: f64) -> (Option<(f64,
     (best, margin)
 }
 
-fn check(bvh: &Bvh, tris: &[[Vec3; 3]], rays: &[(Vec3, Vec3)]) -> usize {
+/// The SIMD levels this CPU runs (scalar always).
+fn levels() -> Vec<SimdLevel> {
+    SimdLevel::ALL
+        .into_iter()
+        .filter(|l| l.is_supported())
+        .collect()
+}
+
+/// [`check_level`] at every supported SIMD level, forced one by one; the levels must also
+/// return identical hits.
+fn check(bvh: &mut Bvh, tris: &[[Vec3; 3]], rays: &[(Vec3, Vec3)]) -> usize {
+    let detected = bvh.simd_level();
+    let mut compared = usize::MAX;
+    let mut answers = Vec::new();
+    for level in levels() {
+        assert!(bvh.set_simd_level(level));
+        assert_eq!(bvh.simd_level(), level);
+        compared = compared.min(check_level(bvh, tris, rays));
+        let hits: Vec<_> = rays
+            .iter()
+            .map(|&(o, d)| bvh.closest_hit(o, d, 0.0, f32::INFINITY))
+            .collect();
+        answers.push((level, hits));
+    }
+    for (level, hits) in &answers[1..] {
+        assert_eq!(
+            hits, &answers[0].1,
+            "{level:?} and {:?} differ",
+            answers[0].0
+        );
+    }
+    bvh.set_simd_level(detected);
+    compared
+}
+
+fn check_level(bvh: &Bvh, tris: &[[Vec3; 3]], rays: &[(Vec3, Vec3)]) -> usize {
     let mut compared = 0;
     for (k, &(o, d)) in rays.iter().enumerate() {
         let (expected, margin) = brute_force(tris, o, d, f64::INFINITY);
@@ -90,7 +137,7 @@ fn soup(n: usize, seed: u64) -> Vec<[Vec3; 3]> {
 #[test]
 fn random_rays_match_brute_force() {
     let tris = soup(2000, 1);
-    let bvh = Bvh::build(&tris);
+    let mut bvh = Bvh::build(&tris);
     let mut rng = Rng::new(2, 0);
     let rays: Vec<(Vec3, Vec3)> = (0..3000)
         .map(|_| {
@@ -102,12 +149,12 @@ fn random_rays_match_brute_force() {
             )
         })
         .collect();
-    assert!(check(&bvh, &tris, &rays) > 2900);
+    assert!(check(&mut bvh, &tris, &rays) > 2900);
 }
 
 #[test]
 fn grazing_rays_match_brute_force() {
-    let scene = TracedScene::new(&scenes::cornell()).unwrap();
+    let mut scene = TracedScene::new(&scenes::cornell()).unwrap();
     let tris = scene.positions.clone();
     let mut rng = Rng::new(3, 0);
     // Rays skimming the floor (y = 0) at angles down to 1e-4 rad, from just above it.
@@ -124,13 +171,13 @@ fn grazing_rays_match_brute_force() {
             (o, Vec3::new(phi.cos(), sign * angle.sin(), phi.sin()))
         })
         .collect();
-    assert!(check(&scene.bvh, &tris, &rays) > 1500);
+    assert!(check(&mut scene.bvh, &tris, &rays) > 1500);
 }
 
 #[test]
 fn rays_leaving_surfaces_match_brute_force() {
     for scene in [scenes::cornell()] {
-        let traced = TracedScene::new(&scene).unwrap();
+        let mut traced = TracedScene::new(&scene).unwrap();
         let tris = traced.positions.clone();
         let mut rng = Rng::new(4, 0);
         let mut rays = Vec::new();
@@ -143,7 +190,7 @@ fn rays_leaving_surfaces_match_brute_force() {
             }
         }
         let n = rays.len();
-        assert!(check(&traced.bvh, &tris, &rays) > n * 9 / 10);
+        assert!(check(&mut traced.bvh, &tris, &rays) > n * 9 / 10);
     }
 }
 
@@ -183,4 +230,90 @@ fn scale_does_not_change_answers() {
             }
         }
     }
+}
+
+#[test]
+fn rays_starting_past_tmin_match_brute_force() {
+    // tmin skips the hits before it (the node test honours tmin, not a fixed epsilon):
+    // every ray starts inside the soup, at tmin from 0 to half the box.
+    let tris = soup(1000, 7);
+    let mut bvh = Bvh::build(&tris);
+    let mut rng = Rng::new(8, 0);
+    let mut compared = 0;
+    for level in levels() {
+        bvh.set_simd_level(level);
+        for k in 0..2000 {
+            let o = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 10.0 - 5.0;
+            let d = uniform_sphere(rng.next_vec2());
+            let tmin = if k % 4 == 0 {
+                0.0
+            } else {
+                5.0 * rng.next_f32()
+            };
+            let (expected, margin) = brute_force_from(&tris, o, d, tmin as f64, f64::INFINITY);
+            // Also skip answers that lie right at tmin.
+            if margin < 1e-4 || expected.is_some_and(|(t, _)| t < tmin as f64 * (1.0 + 1e-5)) {
+                continue;
+            }
+            let got = bvh.closest_hit(o, d, tmin, f32::INFINITY);
+            match (expected, got) {
+                (None, None) => {}
+                (Some((t, tri)), Some(hit)) => {
+                    assert!(
+                        ((hit.t as f64) - t).abs() <= 1e-4 * t.max(1e-3),
+                        "{level:?} ray {k}"
+                    );
+                    assert_eq!(hit.triangle as usize, tri, "{level:?} ray {k}");
+                }
+                (e, g) => panic!("{level:?} ray {k}: brute force {e:?}, BVH {g:?}"),
+            }
+            assert_eq!(bvh.occluded(o, d, tmin, f32::INFINITY), expected.is_some());
+            compared += 1;
+        }
+    }
+    assert!(compared > 1500 * levels().len());
+}
+
+#[test]
+fn alpha_filters_skip_rejected_hits_at_every_level() {
+    // A filter that rejects every other triangle: the closest hit is the closest accepted
+    // triangle of brute force, and occlusion sees only accepted triangles.
+    let tris = soup(800, 9);
+    let kept: Vec<[Vec3; 3]> = tris.iter().step_by(2).copied().collect();
+    let mut bvh = Bvh::build(&tris);
+    let accept = |t: u32, uv: surfcache::core::glam::Vec2| {
+        assert!(uv.x >= 0.0 && uv.y >= 0.0 && uv.x + uv.y <= 1.0 + 1e-6);
+        t % 2 == 0
+    };
+    let mut rng = Rng::new(10, 0);
+    let rays: Vec<(Vec3, Vec3)> = (0..1500)
+        .map(|_| {
+            let o = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 14.0 - 7.0;
+            (o, uniform_sphere(rng.next_vec2()))
+        })
+        .collect();
+    let mut compared = 0;
+    for level in levels() {
+        bvh.set_simd_level(level);
+        for &(o, d) in &rays {
+            let (expected, margin) = brute_force(&kept, o, d, f64::INFINITY);
+            let (_, margin_all) = brute_force(&tris, o, d, f64::INFINITY);
+            if margin.min(margin_all) < 1e-4 {
+                continue;
+            }
+            let got = bvh.closest_hit_filtered(o, d, 0.0, f32::INFINITY, Some(&accept));
+            match (expected, got) {
+                (None, None) => {}
+                (Some((t, tri)), Some(hit)) => {
+                    assert!(((hit.t as f64) - t).abs() <= 1e-4 * t.max(1e-3));
+                    assert_eq!(hit.triangle as usize, 2 * tri);
+                }
+                (e, g) => panic!("{level:?}: brute force {e:?}, BVH {g:?}"),
+            }
+            let occluded = bvh.occluded_filtered(o, d, 0.0, f32::INFINITY, Some(&accept));
+            assert_eq!(occluded, expected.is_some());
+            compared += 1;
+        }
+    }
+    assert!(compared > 1200 * levels().len());
 }

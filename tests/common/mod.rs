@@ -1,8 +1,10 @@
 //! Helpers shared by the root test binaries: scenes, complete bakes as the product runs
-//! them, lookups at world points, and closed forms.
+//! them, lookups at world points, closed forms, the fast Cornell settings of the CLI tests
+//! and the check that a run of the `surfcache` binary succeeded.
 #![allow(dead_code)]
 
 use std::f32::consts::PI;
+use std::process::Output;
 use std::sync::Arc;
 use surfcache::cache::{
     Cache, CacheSettings, SurfaceCache,
@@ -135,4 +137,30 @@ pub fn sky_minus_blockers(x: Vec3, n: Vec3, blockers: &[Vec<Vec3>], radiance: f3
         .map(|p| polygon_irradiance(x, n, &p, radiance))
         .sum();
     PI * radiance - blocked
-}
+
+/// Small settings that keep a Cornell bake to about a second: no bounce passes (full
+/// paths), a 10 % bound, 8 samples per metre, two threads.
+pub const CORNELL_FAST: [&str; 12] = [
+    "--max-rel-error",
+    "0.1",
+    "--density",
+    "8",
+    "--gather",
+    "0",
+    "--min-samples",
+    "64",
+    "--max-samples",
+    "4096",
+    "--threads",
+    "2",
+];
+
+/// The run exited 0; otherwise fails showing its status and stderr.
+#[track_caller]
+pub fn expect_success(out: &Output, what: &str) {
+    assert!(
+        out.status.success(),
+        "{what} failed: {:?}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );

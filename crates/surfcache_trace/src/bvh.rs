@@ -1,37 +1,36 @@
-//! The ray-tracing acceleration structure: an obvhs CWBVH over world triangles.
+//! The ray-tracing acceleration structure: an obvhs-built CWBVH over world triangles,
+//! traversed by our own kernels ([`traversal`](self) module: 8 children and 8 triangles
+//! per step, SIMD level chosen at run time, see [`SimdLevel`]).
 //!
 //! Triangles are stored in a *canonical space*, `q = (p − c) / D` with `c` the centre and
-//! `D` the diagonal of the scene's bounding box, so that precision and obvhs' fixed node
-//! epsilon (a hit must lie at `t ≥ 1e-4` along the traversal direction) behave the same at
-//! every scene scale. Rays are mapped into that space with a direction of fixed length
-//! [`TRAVERSAL_DIRECTION_LENGTH`] = 2⁻¹⁶, which puts the node epsilon at ~1.5e-9 D, below
-//! float precision: a ray that leaves a surface right next to a corner still finds the
-//! adjacent wall a few nanometres away. Hit distances are mapped back, so callers never
-//! see canonical space.
+//! `D` the diagonal of the scene's bounding box, so that precision behaves the same at
+//! every scene scale. Rays are mapped into that space with a unit direction; the traversal
+//! honours the ray's `[tmin, tmax]` exactly (the node test included), so a ray that leaves
+//! a surface right next to a corner still finds the adjacent wall a few nanometres away.
+//! The triangle test widens barycentrics by [`EDGE_SLACK`] so that shared edges are
+//! watertight. Hit distances are mapped back, so callers never see canonical space.
 //!
 //! The BVH2 the CWBVH is converted from is kept: it answers point queries (nearest surface)
 //! and can be refit when instances move.
+
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+mod traversal;
+
+pub use traversal::{EDGE_SLACK, SimdLevel};
 
 use glam::{Vec2, Vec3, Vec3A};
 use obvhs::{
     BvhBuildParams,
     aabb::Aabb,
     bvh2::{Bvh2, reinsertion::ReinsertionOptimizer},
-    cwbvh::{CwBvh, bvh2_to_cwbvh::bvh2_to_cwbvh},
+    cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh,
     ploc::PlocBuilder,
-    ray::{Ray, RayHit},
-    rt_triangle::RtTriangle,
     splits::split_aabbs_preset,
     triangle::Triangle,
 };
 use std::time::Instant;
-
-/// Length of traversal directions in canonical space (see the module doc).
-pub const TRAVERSAL_DIRECTION_LENGTH: f32 = 1.0 / 65536.0;
-
-/// Barycentric slack of the triangle test: edges shared by two triangles overlap by this
-/// much instead of leaving float-precision cracks that rays slip through.
-const EDGE_SLACK: f32 = 1.0 / (1 << 21) as f32;
+use traversal::{LANES, Scalar, TraversalRay, Tree, Visit, lane_barycentrics, traverse};
 
 /// The closest intersection along a ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -44,27 +43,69 @@ pub struct Hit {
     pub uv: Vec2,
 }
 
-/// obvhs CWBVH plus the BVH2 it was built from, in canonical space.
+/// obvhs CWBVH laid out for our traversal, plus the BVH2 it was built from, in canonical
+/// space.
 pub struct Bvh {
     centre: Vec3A,
     inv_scale: f32,
     scale: f32,
-    cwbvh: CwBvh,
+    tree: Tree,
     bvh2: Bvh2,
-    /// Triangles reordered into CWBVH slot order (a triangle may occupy several slots
-    /// when spatial pre-splits are on).
-    slot_triangles: Vec<RtTriangle>,
-    /// Original triangle index of each CWBVH slot.
-    slot_index: Vec<u32>,
-    /// Seconds spent building (PLOC, reinsertion, conversion).
+    level: SimdLevel,
+    /// Seconds spent building (PLOC, reinsertion, conversion, triangle blocks).
     pub build_seconds: f64,
 }
 
-/// Mapping a world ray into canonical space: origin, direction, and the factor that turns
+/// Mapping a world ray into canonical space: the traversal ray and the factor that turns
 /// canonical `t` back into the caller's `t`.
 struct CanonicalRay {
-    ray: Ray,
+    ray: TraversalRay,
     t_to_world: f32,
+}
+
+/// Candidate filter of a traversal: `ANY` stops at the first accepted hit; `accept`
+/// (alpha masks) sees the caller's triangle index and the hit's barycentrics.
+struct Filter<'a, const ANY: bool> {
+    tree: &'a Tree,
+    accept: Option<&'a dyn Fn(u32, Vec2) -> bool>,
+}
+
+impl<const ANY: bool> Visit for Filter<'_, ANY> {
+    const ANY: bool = ANY;
+
+    #[inline(always)]
+    fn accept(&mut self, slot: usize, _t: f32, ray: &TraversalRay) -> bool {
+        match self.accept {
+            None => true,
+            Some(accept) => accept(
+                self.tree.slot_index[slot],
+                barycentrics(self.tree, slot, ray),
+            ),
+        }
+    }
+}
+
+/// Barycentrics (u, v) of the ray's hit on slot `slot`, clamped into the triangle.
+#[inline]
+fn barycentrics(tree: &Tree, slot: usize, ray: &TraversalRay) -> Vec2 {
+    let (u, v) = lane_barycentrics(&tree.blocks[slot / LANES], slot % LANES, ray);
+    let uv = Vec2::new(u, v).clamp(Vec2::ZERO, Vec2::ONE);
+    let s = uv.x + uv.y;
+    if s > 1.0 { uv / s } else { uv }
+}
+
+/// The traversal compiled for AVX2.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn traverse_avx2<V: Visit>(
+    tree: &Tree,
+    ray: &mut TraversalRay,
+    visit: &mut V,
+) -> Option<(usize, f32)> {
+    unsafe { traverse::<avx2::Avx2, V>(tree, ray, visit) }
 }
 
 impl Bvh {
@@ -77,15 +118,15 @@ impl Bvh {
     /// Builds with explicit obvhs parameters (for benchmarks of the presets).
     pub fn build_with(triangles: &[[Vec3; 3]], params: BvhBuildParams) -> Self {
         let start = Instant::now();
+        let level = SimdLevel::detected();
         if triangles.is_empty() {
             return Self {
                 centre: Vec3A::ZERO,
                 inv_scale: 1.0,
                 scale: 1.0,
-                cwbvh: CwBvh::default(),
+                tree: Tree::default(),
                 bvh2: Bvh2::default(),
-                slot_triangles: Vec::new(),
-                slot_index: Vec::new(),
+                level,
                 build_seconds: 0.0,
             };
         }
@@ -132,19 +173,18 @@ impl Bvh {
         bvh2.uses_spatial_splits = params.pre_split;
         ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
         let cwbvh = bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false);
-        let slot_index = cwbvh.primitive_indices.clone();
-        let slot_triangles = slot_index
+        let corners: Vec<[[f32; 3]; 3]> = tris
             .iter()
-            .map(|&i| RtTriangle::from(&tris[i as usize]))
+            .map(|t| [t.v0, t.v1, t.v2].map(|p| p.to_array()))
             .collect();
+        let tree = Tree::new(cwbvh, &corners);
         Self {
             centre,
             inv_scale,
             scale,
-            cwbvh,
+            tree,
             bvh2,
-            slot_triangles,
-            slot_index,
+            level,
             build_seconds: start.elapsed().as_secs_f64(),
         }
     }
@@ -154,67 +194,54 @@ impl Bvh {
         self.scale
     }
 
+    /// The instruction set the traversal runs with ([`SimdLevel::detected`] at build time).
+    pub fn simd_level(&self) -> SimdLevel {
+        self.level
+    }
+
+    /// Makes the traversal run with `level` (for tests and benchmarks: every level gives
+    /// the same answers). Returns false, leaving the level unchanged, when this CPU cannot
+    /// run it.
+    #[doc(hidden)]
+    pub fn set_simd_level(&mut self, level: SimdLevel) -> bool {
+        let ok = level.is_supported();
+        if ok {
+            self.level = level;
+        }
+        ok
+    }
+
     #[inline(always)]
-    fn canonical(&self, origin: Vec3, direction: Vec3, tmin: f32, tmax: f32) -> CanonicalRay {
+    fn canonical(
+        &self,
+        origin: Vec3,
+        direction: Vec3,
+        tmin: f32,
+        tmax: f32,
+        ordered: bool,
+    ) -> CanonicalRay {
         let o = (Vec3A::from(origin) - self.centre) * self.inv_scale;
-        // `+ 0.0` turns −0.0 components into +0.0: obvhs derives the traversal octant and
-        // the inverse direction differently for −0.0, and such rays miss everything.
-        let d = Vec3A::from(direction) * self.inv_scale + Vec3A::ZERO;
+        // `+ 0.0` turns −0.0 components into +0.0, so that signs and octants agree.
+        let d = Vec3A::from(direction) * self.inv_scale;
         let len = d.length();
-        // t_world = t_canonical * TRAVERSAL_DIRECTION_LENGTH / len
-        let k = TRAVERSAL_DIRECTION_LENGTH / len;
-        let t_to_world = k;
-        let to_canonical = len / TRAVERSAL_DIRECTION_LENGTH;
-        let d = d * k;
-        // obvhs' `Ray::new` clamps components below f32::EPSILON before inverting, which
-        // is wrong for directions this short; invert exactly, saturating only at ±1e35.
-        let inv = |x: f32| {
-            if x.abs() < 1e-35 {
-                1e35f32.copysign(x)
-            } else {
-                1.0 / x
-            }
-        };
+        // A unit direction in canonical space: t_world = t_canonical / len.
+        let d = d * (1.0 / len) + Vec3A::ZERO;
         CanonicalRay {
-            ray: Ray {
-                origin: o,
-                direction: d,
-                inv_direction: Vec3A::new(inv(d.x), inv(d.y), inv(d.z)),
-                tmin: tmin * to_canonical,
-                tmax: tmax * to_canonical,
-            },
-            t_to_world,
+            ray: TraversalRay::new(o.to_array(), d.to_array(), tmin * len, tmax * len, ordered),
+            t_to_world: 1.0 / len,
         }
     }
 
-    /// Möller–Trumbore ray/triangle test (Möller & Trumbore 1997) with [`EDGE_SLACK`] on
-    /// the barycentrics, so shared edges are watertight. Returns `t` or ∞.
+    /// Runs the traversal with this BVH's SIMD level.
     #[inline(always)]
-    fn intersect(tri: &RtTriangle, ray: &Ray) -> f32 {
-        let c = tri.v0 - ray.origin;
-        let r = ray.direction.cross(c);
-        let inv_det = 1.0 / tri.ng.dot(ray.direction);
-        let u = r.dot(tri.e2) * inv_det;
-        let v = r.dot(tri.e1) * inv_det;
-        let w = 1.0 - u - v;
-        let t = tri.ng.dot(c) * inv_det;
-        // Non-short-circuit `&`: one well-predicted branch instead of six.
-        // (A zero determinant gives inv_det = ±∞ and NaN or infinite u, v, t: rejected.)
-        let inside = (u >= -EDGE_SLACK) & (v >= -EDGE_SLACK) & (w >= -EDGE_SLACK);
-        if inside & (t >= ray.tmin) & (t <= ray.tmax) {
-            t
-        } else {
-            f32::INFINITY
+    fn run<V: Visit>(&self, ray: &mut TraversalRay, visit: &mut V) -> Option<(usize, f32)> {
+        match self.level {
+            // SAFETY: the level is only ever set to one the CPU supports.
+            #[cfg(target_arch = "x86_64")]
+            SimdLevel::Avx2 => unsafe { traverse_avx2(&self.tree, ray, visit) },
+            // SAFETY: the scalar kernels need no CPU features.
+            _ => unsafe { traverse::<Scalar, V>(&self.tree, ray, visit) },
         }
-    }
-
-    /// Barycentrics (u, v) of the ray's hit on slot `slot`, clamped into the triangle.
-    #[inline(always)]
-    fn barycentrics(&self, slot: usize, ray: &Ray) -> Vec2 {
-        let uv = self.slot_triangles[slot].compute_barycentric(ray);
-        let uv = uv.clamp(Vec2::ZERO, Vec2::ONE);
-        let s = uv.x + uv.y;
-        if s > 1.0 { uv / s } else { uv }
     }
 
     /// Closest hit of the ray `origin + t·direction`, `t ∈ [tmin, tmax]`, skipping hits that
@@ -228,31 +255,19 @@ impl Bvh {
         tmax: f32,
         accept: Option<&dyn Fn(u32, Vec2) -> bool>,
     ) -> Option<Hit> {
-        if self.slot_triangles.is_empty() {
+        if self.tree.nodes.is_empty() {
             return None;
         }
-        let c = self.canonical(origin, direction, tmin, tmax);
-        let mut hit = RayHit::none();
-        let found = match accept {
-            None => self.cwbvh.ray_traverse(c.ray, &mut hit, |ray, slot| {
-                Self::intersect(&self.slot_triangles[slot], ray)
-            }),
-            Some(accept) => self.cwbvh.ray_traverse(c.ray, &mut hit, |ray, slot| {
-                let t = Self::intersect(&self.slot_triangles[slot], ray);
-                if t.is_finite() && !accept(self.slot_index[slot], self.barycentrics(slot, ray)) {
-                    return f32::INFINITY;
-                }
-                t
-            }),
+        let mut c = self.canonical(origin, direction, tmin, tmax, true);
+        let mut filter = Filter::<false> {
+            tree: &self.tree,
+            accept,
         };
-        if !found {
-            return None;
-        }
-        let slot = hit.primitive_id as usize;
+        let (slot, t) = self.run(&mut c.ray, &mut filter)?;
         Some(Hit {
-            t: hit.t * c.t_to_world,
-            triangle: self.slot_index[slot],
-            uv: self.barycentrics(slot, &c.ray),
+            t: t * c.t_to_world,
+            triangle: self.tree.slot_index[slot],
+            uv: barycentrics(&self.tree, slot, &c.ray),
         })
     }
 
@@ -272,23 +287,15 @@ impl Bvh {
         tmax: f32,
         accept: Option<&dyn Fn(u32, Vec2) -> bool>,
     ) -> bool {
-        if self.slot_triangles.is_empty() {
+        if self.tree.nodes.is_empty() {
             return false;
         }
-        let c = self.canonical(origin, direction, tmin, tmax);
-        let miss = match accept {
-            None => self.cwbvh.ray_traverse_miss(c.ray, |ray, slot| {
-                Self::intersect(&self.slot_triangles[slot], ray)
-            }),
-            Some(accept) => self.cwbvh.ray_traverse_miss(c.ray, |ray, slot| {
-                let t = Self::intersect(&self.slot_triangles[slot], ray);
-                if t.is_finite() && !accept(self.slot_index[slot], self.barycentrics(slot, ray)) {
-                    return f32::INFINITY;
-                }
-                t
-            }),
+        let mut c = self.canonical(origin, direction, tmin, tmax, false);
+        let mut filter = Filter::<true> {
+            tree: &self.tree,
+            accept,
         };
-        !miss
+        self.run(&mut c.ray, &mut filter).is_some()
     }
 
     /// Any-hit query without alpha masks.

@@ -1,6 +1,7 @@
 //! Ray tracing for surfcache: the obvhs BVH, ray queries, and the path tracer.
 //!
-//! - [`bvh`]: CWBVH over world triangles in a scale-normalised space; closest hit with
+//! - [`bvh`]: obvhs-built CWBVH over world triangles in a scale-normalised space, traversed
+//!   by our own SIMD kernels (level chosen at run time); closest hit with
 //!   barycentrics, any hit for shadow rays, point queries.
 //! - [`traced_scene`]: a `Scene` flattened into world-space triangle arrays with its BVH,
 //!   surface points with the normal function ν, spawn offsets that scale with the scene,
@@ -25,7 +26,7 @@ pub mod light_sampling;
 pub mod path_tracer;
 pub mod traced_scene;
 
-pub use bvh::{Bvh, Hit};
+pub use bvh::{Bvh, Hit, SimdLevel};
 pub use irradiance::{
     Estimate, EstimatorSettings, FLOOR_FRACTION, PointInScene, Query, Sampler, ZERO_RUN_EVENTS,
     estimate, estimate_change, reference_irradiance, unchanged, zero_run_std_error,

@@ -20,6 +20,7 @@ use surfcache_cache::{
     archive::BakeArchive,
     bake::{DEFAULT_GATHER_PASSES, FLOOR_FRACTION},
 };
+use surfcache_io::Untrusted;
 
 /// `surfcache bake` options (CONTRACT.md, plus the project's own).
 #[derive(clap::Args)]
@@ -140,7 +141,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
     else {
         bail!(
             "interrupted: nothing was written to '{}'",
-            args.out.display()
+            Untrusted::path(&args.out)
         );
     };
     let floor = settings.estimator.floor;
@@ -202,7 +203,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         bake_seconds,
         stats.sample_points,
         stats.cache_bytes,
-        args.out.display()
+        Untrusted::path(&args.out)
     );
     Ok(())
 }

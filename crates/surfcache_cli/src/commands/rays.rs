@@ -9,7 +9,7 @@ use glam::{Vec2, Vec3};
 use std::path::PathBuf;
 use surfcache_core::{
     geometry::to_world,
-    sampling::{Rng, cosine_hemisphere},
+    sampling::{Rng, cosine_hemisphere, uniform_sphere},
 };
 
 #[derive(clap::Args)]
@@ -17,7 +17,9 @@ pub struct RaysArgs {
     /// A .gltf/.glb file or a built-in scene name (cornell).
     scene: String,
     /// `surface`: origins uniform over the surface area (random side, lifted by the spawn
-    /// offset) with cosine-distributed directions; `camera`: a pinhole camera's primary rays.
+    /// offset) with cosine-distributed directions; `camera`: a pinhole camera's primary rays;
+    /// `box`: incoherent rays, origins uniform in the scene's bounding box and directions
+    /// uniform over the sphere.
     #[arg(long, default_value = "surface")]
     kind: String,
     /// Number of rays.
@@ -57,11 +59,15 @@ pub fn run(args: RaysArgs) -> Result<()> {
                 push(scene.spawn_origin(&p), d);
             }
         }
+        "box" => {
+            let (lo, hi) = bounds(&scene.positions);
+            for _ in 0..args.count {
+                let u = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+                push(lo + (hi - lo) * u, uniform_sphere(rng.next_vec2()));
+            }
+        }
         "camera" => {
-            let (lo, hi) = scene.positions.iter().flatten().fold(
-                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-                |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-            );
+            let (lo, hi) = bounds(&scene.positions);
             // Default: inside the bounds, 45 % of the depth in front of the centre.
             let c = 0.5 * (lo + hi);
             let eye = c - Vec3::Z * 0.45 * (hi.z - lo.z);
@@ -73,7 +79,15 @@ pub fn run(args: RaysArgs) -> Result<()> {
                 push(camera.eye, camera.direction(s, 1.0));
             }
         }
-        other => bail!("unknown ray kind '{other}' (known: surface, camera)"),
+        other => bail!("unknown ray kind '{other}' (known: surface, camera, box)"),
     }
     Ok(surfcache_io::write_file_atomically(&args.output, &out)?)
+}
+
+/// Bounding box of the triangles' corners.
+fn bounds(positions: &[[Vec3; 3]]) -> (Vec3, Vec3) {
+    positions.iter().flatten().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    )
 }
