@@ -223,6 +223,16 @@ impl Lightmaps {
         self.maps[instance as usize].texels_per_metre
     }
 
+    /// Texels of one layer that a triangle owns (the estimated ones; the rest are gutter).
+    pub fn owned_texels(&self) -> usize {
+        self.owner.iter().filter(|&&t| t != NONE).count()
+    }
+
+    /// Number of charts over all instances.
+    pub fn chart_count(&self) -> usize {
+        self.chart.iter().map(|&c| c as usize + 1).max().unwrap_or(0)
+    }
+
     /// UV1 of the corners of traced triangle `t`, in the traced scene's corner order.
     pub fn triangle_uv1(&self, t: u32) -> [Vec2; 3] {
         self.uv1[t as usize]
@@ -358,7 +368,19 @@ fn usable_uv1_area(uv1: &[[Vec2; 3]]) -> Option<f32> {
 /// axis test of a triangle and a box (Akenine-Möller 2001: the box axes, then each edge
 /// normal against the box corner farthest along it). A triangle that overlaps no texel
 /// that much still gets the texel holding its centroid. Degenerate triangles get none.
-pub fn conservative_texels(corners: [Vec2; 3], clip: [u32; 4], mut f: impl FnMut(u32, u32)) {
+pub fn conservative_texels(corners: [Vec2; 3], clip: [u32; 4], f: impl FnMut(u32, u32)) {
+    texels_overlapped_by(corners, clip, TEXEL_EPSILON, f);
+}
+
+/// [`conservative_texels`] with overlaps of at most `epsilon` texels counted as none (a
+/// negative `epsilon` also counts texels the triangle comes within `-epsilon` of: a
+/// superset, which the atlas packer reserves).
+pub(crate) fn texels_overlapped_by(
+    corners: [Vec2; 3],
+    clip: [u32; 4],
+    epsilon: f32,
+    mut f: impl FnMut(u32, u32),
+) {
     let [a, b, c] = corners;
     let twice_area = (b - a).perp_dot(c - a);
     if !(twice_area.is_finite() && twice_area != 0.0) || clip[2] == 0 || clip[3] == 0 {
@@ -369,6 +391,8 @@ pub fn conservative_texels(corners: [Vec2; 3], clip: [u32; 4], mut f: impl FnMut
     let edges = [(a, b), (b, c), (c, a)].map(|(p, q)| (p, (q - p).perp() * sign));
     let lo = a.min(b).min(c);
     let hi = a.max(b).max(c);
+    let reach = Vec2::splat((-epsilon).max(0.0));
+    let (lo, hi) = (lo - reach, hi + reach);
     let (cx1, cy1) = (clip[0] + clip[2] - 1, clip[1] + clip[3] - 1);
     let x0 = (lo.x.floor().max(0.0) as u32).clamp(clip[0], cx1);
     let y0 = (lo.y.floor().max(0.0) as u32).clamp(clip[1], cy1);
@@ -377,17 +401,17 @@ pub fn conservative_texels(corners: [Vec2; 3], clip: [u32; 4], mut f: impl FnMut
     let mut any = false;
     for y in y0..=y1 {
         let yf = y as f32;
-        if yf + 1.0 - lo.y <= TEXEL_EPSILON || hi.y - yf <= TEXEL_EPSILON {
+        if yf + 1.0 - lo.y <= epsilon.max(0.0) || hi.y - yf <= epsilon.max(0.0) {
             continue;
         }
         for x in x0..=x1 {
             let xf = x as f32;
-            if xf + 1.0 - lo.x <= TEXEL_EPSILON || hi.x - xf <= TEXEL_EPSILON {
+            if xf + 1.0 - lo.x <= epsilon.max(0.0) || hi.x - xf <= epsilon.max(0.0) {
                 continue;
             }
             let separated = edges.iter().any(|&(p, n)| {
                 let reach = n.dot(Vec2::new(xf, yf) - p) + n.x.max(0.0) + n.y.max(0.0);
-                reach <= TEXEL_EPSILON * n.length()
+                reach <= epsilon * n.length()
             });
             if !separated {
                 any = true;
