@@ -230,7 +230,11 @@ impl Lightmaps {
 
     /// Number of charts over all instances.
     pub fn chart_count(&self) -> usize {
-        self.chart.iter().map(|&c| c as usize + 1).max().unwrap_or(0)
+        self.chart
+            .iter()
+            .map(|&c| c as usize + 1)
+            .max()
+            .unwrap_or(0)
     }
 
     /// UV1 of the corners of traced triangle `t`, in the traced scene's corner order.

@@ -57,7 +57,7 @@ impl ChartMesh {
             }
         }
         edges.sort_unstable();
-        let cos_smooth = std::env::var("ATLAS_SMOOTH").ok().and_then(|s| s.parse::<f32>().ok()).unwrap_or(SMOOTH_ANGLE_DEGREES).to_radians().cos(); // TIMING
+        let cos_smooth = SMOOTH_ANGLE_DEGREES.to_radians().cos();
         let mut across = vec![[(NONE, 0u8); 3]; n];
         let mut start = 0;
         while start < edges.len() {
@@ -224,10 +224,12 @@ pub(super) fn grow(
         }
         if corners[third] == NONE {
             let p3 = mesh.positions[tu];
-            let (ua, ub) = (g.uv[corners[k] as usize], g.uv[corners[(k + 1) % 3] as usize]);
+            let (ua, ub) = (
+                g.uv[corners[k] as usize],
+                g.uv[corners[(k + 1) % 3] as usize],
+            );
             corners[third] = g.uv.len() as u32;
-            g.uv
-                .push(unfold(ua, ub, p3[k], p3[(k + 1) % 3], p3[third]));
+            g.uv.push(unfold(ua, ub, p3[k], p3[(k + 1) % 3], p3[third]));
         }
         chart[tu] = id;
         slot[tu] = g.tris.len() as u32;

@@ -224,7 +224,10 @@ pub fn generate_atlas(
         .iter()
         .zip(&weld)
         .map(|([a, b, c], w)| {
-            w[0] == w[1] || w[1] == w[2] || w[2] == w[0] || !((*b - *a).cross(*c - *a).length() > 0.0)
+            w[0] == w[1]
+                || w[1] == w[2]
+                || w[2] == w[0]
+                || !((*b - *a).cross(*c - *a).length() > 0.0)
         })
         .collect();
     let mesh = ChartMesh::new(positions, normals, &weld, &degenerate);
@@ -242,10 +245,7 @@ pub fn generate_atlas(
     for _ in 0..MAX_LAYOUTS {
         let atlas = lay_out(&mesh, &parts, &weld, &degenerate, density, gutter);
         let size = atlas.width.max(atlas.height);
-        if best
-            .as_ref()
-            .is_some_and(|b| b.width.max(b.height) <= size)
-        {
+        if best.as_ref().is_some_and(|b| b.width.max(b.height) <= size) {
             break;
         }
         best = Some(atlas);
@@ -275,7 +275,6 @@ fn lay_out(
     gutter: u32,
 ) -> ChartAtlas {
     let n = mesh.len();
-    let t0 = std::time::Instant::now(); // TIMING
     let flat: Vec<FlatChart> = parts
         .par_iter()
         .map(|part| {
@@ -287,7 +286,6 @@ fn lay_out(
         .into_iter()
         .flatten()
         .collect();
-    let t1 = t0.elapsed().as_secs_f32(); // TIMING
     let texels: Vec<ChartTexels> = flat
         .par_iter()
         .map(|f| chart_texels(&f.uv, density, gutter))
@@ -295,18 +293,18 @@ fn lay_out(
     // The texture: as wide as a square holding every claim, at least as wide as every
     // chart's narrow side.
     let area: u64 = texels.iter().map(|c| c.claim[0].area()).sum();
-    let boxes_area: u64 = texels.iter().map(|c| (c.size[0][0] * c.size[0][1]) as u64).sum(); // TIMING
-    if std::env::var_os("ATLAS_BUDGET").is_some() { eprintln!("BUDGET n={n} charts={} boxes={boxes_area} claims={area}", flat.len()); } // TIMING
     let narrow = texels
         .iter()
         .map(|c| c.claim[0].width.min(c.claim[1].width))
         .max()
         .unwrap_or(1);
-    let width = ((area as f64).sqrt().ceil() as u32).max(narrow).max(1).div_ceil(4) * 4;
+    let width = ((area as f64).sqrt().ceil() as u32)
+        .max(narrow)
+        .max(1)
+        .div_ceil(4)
+        * 4;
     let claims: Vec<[Claim; 2]> = texels.iter().map(|c| c.claim.clone()).collect();
-    let t2 = t0.elapsed().as_secs_f32(); // TIMING
     let (placements, rows) = pack_claims(&claims, width);
-    if std::env::var_os("ATLAS_TIMING").is_some() { eprintln!("TIMING n={n} parts={} charts={} flatten {t1:.2} texels {:.2} pack {:.2} fill {:.3} fails {:?}", parts.len(), flat.len(), t2 - t1, t0.elapsed().as_secs_f32() - t2, area as f64 / (width as f64 * rows as f64), parameterise::FAILS.iter().map(|a| a.swap(0, std::sync::atomic::Ordering::Relaxed)).collect::<Vec<_>>()); } // TIMING
     let height = (rows.div_ceil(4) * 4).max(4);
     let size = Vec2::new(width as f32, height as f32);
     let mut uv1 = vec![[Vec2::ZERO; 3]; n];
@@ -386,7 +384,6 @@ fn chart_texels(uv: &[[Vec2; 3]], density: f32, gutter: u32) -> ChartTexels {
     // Per axis: texel coordinate of lo, texels per metre, footprint texels.
     let axis_map = |e: f32| {
         let span = e * density;
-        if std::env::var_os("ATLAS_NOSNAP").is_some() { let n = (span - TEXEL_EPSILON).ceil().max(1.0); return (0.5 * (n - span), density, n as u32); } // TIMING
         if span < 1.0 {
             (0.5 - 0.5 * span, density, 1u32)
         } else {

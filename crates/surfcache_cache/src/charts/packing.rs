@@ -328,6 +328,9 @@ mod tests {
         let claim = Claim::of_footprint(&fp, 2, 2, 1);
         assert_eq!((claim.width, claim.height), (4, 4));
         assert_eq!(claim.area(), 15);
-        assert_eq!((claim.key_row, claim.key_start, claim.key_length), (1, 0, 4));
+        assert_eq!(
+            (claim.key_row, claim.key_start, claim.key_length),
+            (1, 0, 4)
+        );
     }
 }

@@ -16,7 +16,7 @@
 //!   no texel is reached by two parts of the chart that are far apart on the surface:
 //!   texels a triangle overlaps, and their 8 neighbours that bilinear filtering reads
 //!   with them, map to points within [`TEXEL_REACH`] texels of each other.
-//!   Otherwise the chart is bisected ([`super::growing::bisect`]) and each part tried
+//!   Otherwise the chart is bisected ([`super::growing::split`]) and each part tried
 //!   again; a single triangle is always accepted (unfolded, it is an isometry).
 
 use super::{
@@ -42,10 +42,7 @@ pub const STRETCH_TEXELS: f32 = 2.0;
 /// reduction that ends it earlier.
 const CG_ITERATIONS: usize = 500;
 const CG_TOLERANCE: f32 = 1e-4;
-fn cg_iterations() -> usize { std::env::var("ATLAS_CG_IT").ok().and_then(|s| s.parse().ok()).unwrap_or(CG_ITERATIONS) } // TIMING
-fn cg_tolerance() -> f32 { std::env::var("ATLAS_CG_TOL").ok().and_then(|s| s.parse().ok()).unwrap_or(CG_TOLERANCE) } // TIMING
 
-pub static FAILS: [std::sync::atomic::AtomicUsize; 10] = [const { std::sync::atomic::AtomicUsize::new(0) }; 10]; // TIMING
 /// A flattened chart: input triangles and their corners in the plane (metres).
 pub(super) struct FlatChart {
     pub triangles: Vec<u32>,
@@ -61,7 +58,11 @@ pub(super) fn flatten_or_split(mesh: &ChartMesh, density: f32, out: &mut Vec<Fla
     debug_assert_eq!(grown.tris.len(), mesh.len());
     match flatten(mesh, &grown, density) {
         Ok(uv) => out.push(FlatChart {
-            triangles: grown.tris.iter().map(|&t| mesh.triangle[t as usize]).collect(),
+            triangles: grown
+                .tris
+                .iter()
+                .map(|&t| mesh.triangle[t as usize])
+                .collect(),
             uv,
         }),
         Err((a, b)) => {
@@ -104,45 +105,18 @@ fn flatten(mesh: &ChartMesh, g: &Grown, density: f32) -> Result<Vec<[Vec2; 3]>, 
             .collect();
         return accept(mesh, tris, uv, density);
     }
-    // The rigid unfolding is already isometric on developable charts.
-    let unfolded = g.corners.iter().map(|c| c.map(|v| g.uv[v as usize])).collect();
-    if std::env::var_os("ATLAS_UNFOLD_FIRST").is_some() || tris.len() == 1 { // TIMING
-    match accept(mesh, tris, unfolded, density) {
-        Ok(uv) => return Ok(uv),
-        Err(pair) if tris.len() == 1 => return Err(pair),
-        Err(_) => {}
+    if tris.len() == 1 {
+        // Unfolded, a single triangle is an isometry.
+        let unfolded = g
+            .corners
+            .iter()
+            .map(|c| c.map(|v| g.uv[v as usize]))
+            .collect();
+        return accept(mesh, tris, unfolded, density);
     }
-    } // TIMING
-    let kappa = curvature(mesh, g); // TIMING
     let x = conformal_map(mesh, g);
     let uv = g.corners.iter().map(|c| c.map(|v| x[v as usize])).collect();
-    let r = accept(mesh, tris, uv, density);
-    if std::env::var_os("ATLAS_KAPPA").is_some() { eprintln!("KAPPA {kappa:.3} {} {}", tris.len(), r.is_ok()); } // TIMING
-    r
-}
-
-/// Σ |2π − angle sum| over the chart's interior vertices (integrated |Gaussian curvature|).
-fn curvature(mesh: &ChartMesh, g: &Grown) -> f32 {
-    let nv = g.uv.len();
-    let mut angle = vec![0.0f32; nv];
-    let mut edges: std::collections::HashMap<(u32, u32), u32> = Default::default();
-    for (&t, c) in g.tris.iter().zip(&g.corners) {
-        let p = mesh.positions[t as usize];
-        for k in 0..3 {
-            let (a, b) = ((p[(k + 1) % 3] - p[k]).normalize_or_zero(), (p[(k + 2) % 3] - p[k]).normalize_or_zero());
-            angle[c[k] as usize] += a.dot(b).clamp(-1.0, 1.0).acos();
-            let (u, v) = (c[k].min(c[(k + 1) % 3]), c[k].max(c[(k + 1) % 3]));
-            *edges.entry((u, v)).or_insert(0) += 1;
-        }
-    }
-    let mut boundary = vec![false; nv];
-    for (&(u, v), &n) in &edges {
-        if n == 1 {
-            boundary[u as usize] = true;
-            boundary[v as usize] = true;
-        }
-    }
-    (0..nv).filter(|&v| !boundary[v]).map(|v| (std::f32::consts::TAU - angle[v]).abs()).sum()
+    accept(mesh, tris, uv, density)
 }
 
 /// A chart's corners in the plane scaled to the surface's area, if they pass the checks
@@ -168,24 +142,16 @@ fn accept(
     }
     let scale = (world / flat).sqrt() as f32;
     uv.iter_mut().for_each(|q| *q = q.map(|p| p * scale));
-    let max_stretch = std::env::var("ATLAS_STRETCH").ok().and_then(|s| s.parse::<f32>().ok()).unwrap_or(MAX_STRETCH); // TIMING
-    use std::sync::atomic::Ordering::Relaxed; // TIMING
-    let fail = |k: usize| { FAILS[k].fetch_add(1, Relaxed); FAILS[4 + k].fetch_add(tris.len(), Relaxed); }; // TIMING
     let (ratio, lo, hi) = stretch(mesh, tris, &uv, density);
-    if ratio > max_stretch {
-        fail(0); // TIMING
-        if std::env::var_os("ATLAS_DEBUG3").is_some() { let asp = |i: u32| { let p = mesh.positions[tris[i as usize] as usize]; let l = (p[1]-p[0]).length().max((p[2]-p[1]).length()).max((p[0]-p[2]).length()); (p[1]-p[0]).cross(p[2]-p[0]).length() / (l * l) }; let sv = |i: u32| singular_values(mesh.positions[tris[i as usize] as usize], uv[i as usize]); eprintln!("STRETCH m={} ratio={ratio:.2} lo asp {:.4} {:?} hi asp {:.4} {:?}", tris.len(), asp(lo), sv(lo), asp(hi), sv(hi)); } // TIMING
+    if ratio > MAX_STRETCH {
         return Err((lo, hi));
     }
     if let Some(pair) = overlapping(&uv, TEXEL_EPSILON / density) {
-        fail(1); // TIMING
         return Err(pair);
     }
     if let Some(pair) = texels_disagree(mesh, tris, &uv, density) {
-        fail(2); // TIMING
         return Err(pair);
     }
-    fail(3); // TIMING
     Ok(uv)
 }
 
@@ -220,8 +186,7 @@ pub fn singular_values(p: [Vec3; 3], q: [Vec2; 3]) -> Option<(f32, f32)> {
 /// chart less than [`STRETCH_TEXELS`] texels across passes (ratio 1).
 fn stretch(mesh: &ChartMesh, tris: &[u32], uv: &[[Vec2; 3]], density: f32) -> (f32, u32, u32) {
     let (lo, hi) = bounds(uv);
-    let min_texels = std::env::var("ATLAS_STRETCH_TEXELS").ok().and_then(|s| s.parse::<f32>().ok()).unwrap_or(STRETCH_TEXELS); // TIMING
-    if (hi - lo).max_element() * density < min_texels {
+    if (hi - lo).max_element() * density < STRETCH_TEXELS {
         return (1.0, 0, 0);
     }
     let min_area = 1e-3 / (density * density);
@@ -243,7 +208,11 @@ fn stretch(mesh: &ChartMesh, tris: &[u32], uv: &[[Vec2; 3]], density: f32) -> (f
     if hi.0 == 0.0 {
         return (1.0, 0, 0);
     }
-    let ratio = if lo.0 > 0.0 { hi.0 / lo.0 } else { f32::INFINITY };
+    let ratio = if lo.0 > 0.0 {
+        hi.0 / lo.0
+    } else {
+        f32::INFINITY
+    };
     (ratio, lo.1, hi.1)
 }
 
@@ -314,8 +283,12 @@ fn conformal_map(mesh: &ChartMesh, g: &Grown) -> Vec<Vec2> {
         });
     let axis = usize::from(hi.y - lo.y > hi.x - lo.x);
     let key = |i: usize| x[i][axis];
-    let p0 = (0..nv).min_by(|&i, &j| key(i).total_cmp(&key(j))).unwrap_or(0);
-    let p1 = (0..nv).max_by(|&i, &j| key(i).total_cmp(&key(j))).unwrap_or(0);
+    let p0 = (0..nv)
+        .min_by(|&i, &j| key(i).total_cmp(&key(j)))
+        .unwrap_or(0);
+    let p1 = (0..nv)
+        .max_by(|&i, &j| key(i).total_cmp(&key(j)))
+        .unwrap_or(0);
     if p0 == p1 {
         return x;
     }
@@ -339,12 +312,11 @@ fn conformal_map(mesh: &ChartMesh, g: &Grown) -> Vec<Vec2> {
     let mut q = vec![Vec2::ZERO; nv];
     let dot = |a: &[Vec2], b: &[Vec2]| a.iter().zip(b).map(|(a, b)| a.dot(*b) as f64).sum::<f64>();
     let mut rz = dot(&r, &z);
-    let target = rz * (cg_tolerance() as f64).powi(2);
-    for _ in 0..cg_iterations() {
+    let target = rz * (CG_TOLERANCE as f64).powi(2);
+    for _ in 0..CG_ITERATIONS {
         if !(rz > target && rz > 0.0) {
             break;
         }
-        FAILS[8].fetch_add(1, std::sync::atomic::Ordering::Relaxed); FAILS[9].fetch_add(nv, std::sync::atomic::Ordering::Relaxed); // TIMING
         apply(&p, &mut q);
         for (qi, &f) in q.iter_mut().zip(&free) {
             if f == 0.0 {
@@ -377,7 +349,9 @@ fn overlapping(uv: &[[Vec2; 3]], epsilon: f32) -> Option<(u32, u32)> {
     let m = uv.len();
     let (lo, hi) = bounds(uv);
     let span = (hi - lo).max(Vec2::splat(f32::MIN_POSITIVE));
-    let cell = ((span.x * span.y) / m as f32).sqrt().max(span.max_element() / 4096.0);
+    let cell = ((span.x * span.y) / m as f32)
+        .sqrt()
+        .max(span.max_element() / 4096.0);
     let dims = (span / cell).ceil().as_uvec2().max(glam::UVec2::ONE);
     let cell_of = |p: Vec2| {
         ((p - lo) / cell)
@@ -387,7 +361,10 @@ fn overlapping(uv: &[[Vec2; 3]], epsilon: f32) -> Option<(u32, u32)> {
     };
     let mut entries: Vec<(u64, u32)> = Vec::with_capacity(2 * m);
     for (t, q) in uv.iter().enumerate() {
-        let (a, b) = (cell_of(q[0].min(q[1]).min(q[2])), cell_of(q[0].max(q[1]).max(q[2])));
+        let (a, b) = (
+            cell_of(q[0].min(q[1]).min(q[2])),
+            cell_of(q[0].max(q[1]).max(q[2])),
+        );
         for y in a.y..=b.y {
             for x in a.x..=b.x {
                 entries.push(((y as u64) << 32 | x as u64, t as u32));
