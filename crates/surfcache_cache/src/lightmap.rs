@@ -44,9 +44,11 @@ pub struct LightmapSettings {
     /// TEXCOORD_1 textures are clamped. Default 2048.
     pub max_size: u32,
     /// Free texels around every generated chart, filled by dilation (`gutter` passes).
-    /// Default 2: bilinear filtering inside a chart's box never reads beyond it, but
-    /// points near a slanted chart edge read unowned texels one ring out, and a second
-    /// ring keeps mipmap level 1 clean. TEXCOORD_1 layouts bring their own gutters.
+    /// Default 1: bilinear filtering at a point of a triangle reads the texel holding it
+    /// and its 8 neighbours at most, so one ring of the chart's own keeps every read in
+    /// the chart (points near a slanted chart edge read unowned texels of that ring).
+    /// The textures are sampled without mipmaps; a second ring would keep mipmap level
+    /// 1 clean. TEXCOORD_1 layouts bring their own gutters.
     pub gutter: u32,
     /// Also bake the back side of every surface (a second layer; published for
     /// double-sided materials). Default true.
@@ -62,7 +64,7 @@ impl Default for LightmapSettings {
         Self {
             texels_per_metre: 64.0,
             max_size: 2048,
-            gutter: 2,
+            gutter: 1,
             both_sides: true,
             buried_threshold: 0.5,
         }

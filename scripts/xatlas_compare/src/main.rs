@@ -1,13 +1,13 @@
 //! Generated lightmap atlas against xatlas on one scene: per instance (one texture each,
 //! as the lightmap cache lays them out) the texels, charts, overhead factor
-//! (texels / (area · density²)), the stretch of texel density, the smallest distance
+//! (texels / (area · density²); also of the texels the triangles cover), the stretch of texel density, the smallest distance
 //! between two charts' texels, and the time of each.
 //!
 //! ```text
-//! cargo run --release --manifest-path scripts/xatlas_compare/Cargo.toml -- SCENE [DENSITY] [GUTTER] [PADDING]
+//! cargo run --release --manifest-path scripts/xatlas_compare/Cargo.toml --target-dir target/xatlas -- SCENE [DENSITY] [GUTTER] [PADDING]
 //! ```
 //! DENSITY defaults to 8 texels per metre, GUTTER (ours: free texels of every chart's
-//! own) to 2 and PADDING (xatlas': free texels between two charts) to 2 · GUTTER, the
+//! own) to 1 (`LightmapSettings`' default) and PADDING (xatlas': free texels between two charts) to 2 · GUTTER, the
 //! same gap.
 //! Ours runs first on all threads (as `Lightmaps::new`, in parallel over instances), then
 //! on one thread; xatlas runs instance after instance.
@@ -39,7 +39,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err("usage: xatlas_compare SCENE [DENSITY] [GUTTER] [PADDING]".into());
     };
     let density: f32 = args.get(2).map_or(Ok(8.0), |s| s.parse())?;
-    let gutter: u32 = args.get(3).map_or(Ok(2), |s| s.parse())?;
+    let gutter: u32 = args.get(3).map_or(Ok(1), |s| s.parse())?;
     // xatlas' padding is the free texels between two charts; our gutter is each chart's own.
     let padding: u32 = args.get(4).map_or(Ok(2 * gutter), |s| s.parse())?;
     let traced = TracedScene::new(&load_scene(path)?.scene)?;
@@ -276,10 +276,7 @@ fn xatlas_layout(positions: &[[Vec3; 3]], density: f32, padding: u32) -> Layout 
         );
         let a = &*atlas;
         let mesh = &*a.meshes;
-        if std::env::var_os("XATLAS_DEBUG").is_some() {
-            eprintln!("atlas {}x{} charts {} meshes {} tpu {} verts {} first {:?}", a.width, a.height, a.chart_count, a.mesh_count, a.texels_per_unit, mesh.vertex_count, (*mesh.vertex_array).uv);
-        }
-        let vertices = std::slice::from_raw_parts(mesh.vertex_array, mesh.vertex_count as usize);
+            let vertices = std::slice::from_raw_parts(mesh.vertex_array, mesh.vertex_count as usize);
         let indices = std::slice::from_raw_parts(mesh.index_array, mesh.index_count as usize);
         let charts = std::slice::from_raw_parts(mesh.chart_array, mesh.chart_count as usize);
         let mut vertex_chart = vec![0u32; vertices.len()];
@@ -313,7 +310,7 @@ fn report(name: &str, instances: &[(Vec<[Vec3; 3]>, Vec<Vec3>)], layouts: &[Layo
         "  {:>3} {:>7} {:>9} {:>11} {:>7} {:>9} {:>6} {:>6} {:>6} {:>5}",
         "#", "tris", "m²", "texels", "charts", "overhead", "mean σ", "min σ", "max σ", "gap"
     );
-    let (mut texels, mut area, mut charts) = (0u64, 0.0f64, 0u64);
+    let (mut texels, mut area, mut charts, mut owned) = (0u64, 0.0f64, 0u64, 0u64);
     let (mut lo, mut hi, mut sum, mut weight) = (f32::INFINITY, 0.0f32, 0.0f64, 0.0f64);
     let mut min_gap = u32::MAX;
     for (i, ((p, _), l)) in instances.iter().zip(layouts).enumerate() {
@@ -332,7 +329,8 @@ fn report(name: &str, instances: &[(Vec<[Vec3; 3]>, Vec<Vec3>)], layouts: &[Layo
                 weight += at as f64;
             }
         }
-        let gap = chart_gap(l);
+        let (gap, covered) = chart_gap(l);
+        owned += covered;
         let t = l.width as u64 * l.height as u64;
         println!(
             "  {i:>3} {:>7} {a:>9.1} {t:>11} {n_charts:>7} {:>9.2} {:>6} {ilo:>6.3} {ihi:>6.3} {gap:>5}",
@@ -348,15 +346,16 @@ fn report(name: &str, instances: &[(Vec<[Vec3; 3]>, Vec<Vec3>)], layouts: &[Layo
         min_gap = min_gap.min(gap);
     }
     println!(
-        "  all {texels} texels, {charts} charts, overhead {:.2}, σ/density mean {:.3} min {lo:.3} max {hi:.3}, smallest gap between charts {min_gap} texels",
+        "  all {texels} texels ({owned} covered by triangles), {charts} charts, overhead {:.2} ({:.2} covered), σ/density mean {:.3} min {lo:.3} max {hi:.3}, smallest gap between charts {min_gap} texels",
         texels as f64 / (area * (density as f64).powi(2)),
+        owned as f64 / (area * (density as f64).powi(2)),
         sum / weight.max(1e-30)
     );
 }
 
 /// Fewest free texels between the conservative footprints of two different charts (up
-/// to 8; 8 means "8 or more").
-fn chart_gap(l: &Layout) -> u32 {
+/// to 8; 8 means "8 or more"), and the texels in footprints (the ones a bake estimates).
+fn chart_gap(l: &Layout) -> (u32, u64) {
     const REACH: i64 = 9;
     let (w, h) = (l.width as i64, l.height as i64);
     let mut owner = vec![u32::MAX; (w * h) as usize];
@@ -370,8 +369,9 @@ fn chart_gap(l: &Layout) -> u32 {
             owner[k] = c;
         });
     }
+    let covered = owner.iter().filter(|&&c| c != u32::MAX).count() as u64;
     if shared > 0 {
-        return 0;
+        return (0, covered);
     }
     let mut gap = REACH - 1;
     for y in 0..h {
@@ -397,5 +397,5 @@ fn chart_gap(l: &Layout) -> u32 {
             }
         }
     }
-    gap as u32
+    (gap as u32, covered)
 }

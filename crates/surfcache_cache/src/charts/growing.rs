@@ -33,6 +33,10 @@ pub(super) struct ChartMesh {
     /// Across edge k (corners k and k + 1): the neighbour triangle and its edge, or
     /// (NONE, 0).
     pub across: Vec<[(u32, u8); 3]>,
+    /// The same for the edges that are manifold and consistently oriented but sharper
+    /// than [`SMOOTH_ANGLE_DEGREES`] (creases), which charts grow over only when merged
+    /// across them ([`ChartMesh::subset`]).
+    pub creases: Vec<[(u32, u8); 3]>,
 }
 
 impl ChartMesh {
@@ -59,6 +63,7 @@ impl ChartMesh {
         edges.sort_unstable();
         let cos_smooth = SMOOTH_ANGLE_DEGREES.to_radians().cos();
         let mut across = vec![[(NONE, 0u8); 3]; n];
+        let mut creases = vec![[(NONE, 0u8); 3]; n];
         let mut start = 0;
         while start < edges.len() {
             let mut end = start + 1;
@@ -73,9 +78,14 @@ impl ChartMesh {
                 let (_, _, u, j) = edges[start + 1];
                 let (t, u) = (t as usize, u as usize);
                 let opposite = weld[t][k as usize] == weld[u][(j as usize + 1) % 3];
-                if t != u && opposite && normals[t].dot(normals[u]) >= cos_smooth {
-                    across[t][k as usize] = (u as u32, j);
-                    across[u][j as usize] = (t as u32, k);
+                if t != u && opposite {
+                    let edges = if normals[t].dot(normals[u]) >= cos_smooth {
+                        &mut across
+                    } else {
+                        &mut creases
+                    };
+                    edges[t][k as usize] = (u as u32, j);
+                    edges[u][j as usize] = (t as u32, k);
                 }
             }
             start = end;
@@ -85,6 +95,7 @@ impl ChartMesh {
             positions: positions.to_vec(),
             normals: normals.to_vec(),
             across,
+            creases,
         }
     }
 
@@ -92,27 +103,44 @@ impl ChartMesh {
         self.positions.len()
     }
 
-    /// The triangles `tris` (indices into `self`) with the edges between them.
-    pub fn subset(&self, tris: &[u32]) -> Self {
+    /// The triangles `tris` (indices into `self`) with the edges between them; with
+    /// `glue_creases`, the creases between them become edges to grow over.
+    pub fn subset(&self, tris: &[u32], glue_creases: bool) -> Self {
         let local: HashMap<u32, u32> = tris
             .iter()
             .enumerate()
             .map(|(i, &t)| (t, i as u32))
             .collect();
-        let across = tris
+        let inside = |edges: [(u32, u8); 3]| {
+            edges.map(|(u, j)| match local.get(&u) {
+                Some(&l) if u != NONE => (l, j),
+                _ => (NONE, 0),
+            })
+        };
+        let (mut across, mut creases): (Vec<_>, Vec<_>) = tris
             .iter()
             .map(|&t| {
-                self.across[t as usize].map(|(u, j)| match local.get(&u) {
-                    Some(&l) if u != NONE => (l, j),
-                    _ => (NONE, 0),
-                })
+                (
+                    inside(self.across[t as usize]),
+                    inside(self.creases[t as usize]),
+                )
             })
-            .collect();
+            .unzip();
+        if glue_creases {
+            for (a, c) in across.iter_mut().zip(&mut creases) {
+                for k in 0..3 {
+                    if c[k].0 != NONE {
+                        a[k] = std::mem::replace(&mut c[k], (NONE, 0));
+                    }
+                }
+            }
+        }
         Self {
             triangle: tris.iter().map(|&t| self.triangle[t as usize]).collect(),
             positions: tris.iter().map(|&t| self.positions[t as usize]).collect(),
             normals: tris.iter().map(|&t| self.normals[t as usize]).collect(),
             across,
+            creases,
         }
     }
 }

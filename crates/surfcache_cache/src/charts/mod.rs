@@ -3,7 +3,8 @@
 //!
 //! 1. **Charts** ([`growing`]): breadth-first over edges between triangles whose normals
 //!    are within [`SMOOTH_ANGLE_DEGREES`], each chart kept a topological disc (cut where
-//!    growth fronts meet) and unfolded rigidly as it grows.
+//!    growth fronts meet) and unfolded rigidly as it grows; charts smaller than
+//!    [`SMALL_TEXELS`] merge across the creases between them.
 //! 2. **Flattening** ([`parameterise`]): planar charts are projected onto their plane,
 //!    curved ones get a least-squares conformal map; a chart whose texel density varies
 //!    by more than [`MAX_STRETCH`], whose triangles overlap in the plane or which comes
@@ -243,7 +244,8 @@ pub fn generate_atlas(
     let mut density = texels_per_metre.max(f32::MIN_POSITIVE);
     let mut best: Option<ChartAtlas> = None;
     for _ in 0..MAX_LAYOUTS {
-        let atlas = lay_out(&mesh, &parts, &weld, &degenerate, density, gutter);
+        let merged = merge_small_parts(&mesh, &parts, &chart, density);
+        let atlas = lay_out(&mesh, &merged, &weld, &degenerate, density, gutter);
         let size = atlas.width.max(atlas.height);
         if best.as_ref().is_some_and(|b| b.width.max(b.height) <= size) {
             break;
@@ -265,10 +267,86 @@ struct ChartTexels {
     claim: [Claim; 2],
 }
 
-/// The layout of the grown `parts` at `density` (one attempt of [`generate_atlas`]).
-fn lay_out(
+/// Charts whose bounding box has a diagonal of at most this many texels merge with
+/// their neighbours across creases while the union stays that small: a small block's
+/// sides, a moulding's faces or a leaf's two halves are smaller than the texels that
+/// light them, so a crease between them cannot be resolved, and apart each would pay
+/// its own border texels and gutters.
+pub const SMALL_TEXELS: f32 = 2.0;
+
+/// Grown `parts` (`part[t]`: part of triangle t) merged across creases while their
+/// union's bounding box stays within [`SMALL_TEXELS`] at `density`, greedily over the
+/// creases in triangle order; each group comes with whether it merged parts (its
+/// creases are then glued).
+fn merge_small_parts(
     mesh: &ChartMesh,
     parts: &[Vec<u32>],
+    part: &[u32],
+    density: f32,
+) -> Vec<(Vec<u32>, bool)> {
+    // Per part: bounding box (kept at the root of its group).
+    let mut bounds: Vec<(Vec3, Vec3)> = parts
+        .iter()
+        .map(|tris| {
+            tris.iter()
+                .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &t| {
+                    let [a, b, c] = mesh.positions[t as usize];
+                    (lo.min(a.min(b).min(c)), hi.max(a.max(b).max(c)))
+                })
+        })
+        .collect();
+    let mut root: Vec<u32> = (0..parts.len() as u32).collect();
+    fn find(root: &mut [u32], mut p: u32) -> u32 {
+        while root[p as usize] != p {
+            root[p as usize] = root[root[p as usize] as usize];
+            p = root[p as usize];
+        }
+        p
+    }
+    let limit = SMALL_TEXELS / density;
+    for t in 0..mesh.len() {
+        for &(u, _) in &mesh.creases[t] {
+            if u == NONE || (u as usize) < t || part[t] == NONE || part[u as usize] == NONE {
+                continue;
+            }
+            let (a, b) = (find(&mut root, part[t]), find(&mut root, part[u as usize]));
+            if a == b {
+                continue;
+            }
+            let (ba, bb) = (bounds[a as usize], bounds[b as usize]);
+            let (lo, hi) = (ba.0.min(bb.0), ba.1.max(bb.1));
+            if (hi - lo).length() <= limit {
+                let (keep, gone) = (a.min(b), a.max(b));
+                root[gone as usize] = keep;
+                bounds[keep as usize] = (lo, hi);
+            }
+        }
+    }
+    let mut groups: Vec<Vec<u32>> = vec![Vec::new(); parts.len()];
+    for p in 0..parts.len() as u32 {
+        let r = find(&mut root, p);
+        groups[r as usize].push(p);
+    }
+    groups
+        .into_iter()
+        .filter(|g| !g.is_empty())
+        .map(|g| {
+            let merged = g.len() > 1;
+            (
+                g.iter()
+                    .flat_map(|&p| parts[p as usize].iter().copied())
+                    .collect(),
+                merged,
+            )
+        })
+        .collect()
+}
+
+/// The layout of the grown `parts` (with whether their creases are glued) at `density`
+/// (one attempt of [`generate_atlas`]).
+fn lay_out(
+    mesh: &ChartMesh,
+    parts: &[(Vec<u32>, bool)],
     weld: &[[u32; 3]],
     degenerate: &[bool],
     density: f32,
@@ -277,9 +355,9 @@ fn lay_out(
     let n = mesh.len();
     let flat: Vec<FlatChart> = parts
         .par_iter()
-        .map(|part| {
+        .map(|(part, glue)| {
             let mut out = Vec::new();
-            flatten_or_split(&mesh.subset(part), density, &mut out);
+            flatten_or_split(&mesh.subset(part, *glue), density, &mut out);
             out
         })
         .collect::<Vec<_>>()

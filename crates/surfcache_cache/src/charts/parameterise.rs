@@ -73,7 +73,7 @@ pub(super) fn flatten_or_split(mesh: &ChartMesh, density: f32, out: &mut Vec<Fla
                 b
             };
             for part in split(mesh, a, b) {
-                flatten_or_split(&mesh.subset(&part), density, out);
+                flatten_or_split(&mesh.subset(&part, false), density, out);
             }
         }
     }
