@@ -4,9 +4,10 @@
 //! parameterisation, packing and rasterisation, in parallel over instances) at each asked
 //! density and prints, per density: the texels of all textures, the overhead factor
 //! (texels / (surface area · density²); 1 would be a perfect fit), the texels owned by a
-//! triangle (the estimated ones) and their overhead factor, the charts, the texel-density stretch of the triangles (σ/density over the
-//! singular values σ of each triangle's metre-to-texel map: area-weighted mean and the
-//! extremes) and the layout time. Figures go in docs/results.md ("Lightmap atlas").
+//! triangle (the estimated ones) and their overhead factor, the charts, the
+//! texel-density stretch of the triangles of at least a thousandth of a texel (σ/density
+//! over the singular values σ of each triangle's metre-to-texel map: area-weighted mean
+//! and the extremes) and the layout time. Figures go in docs/results.md ("Lightmap atlas").
 //!
 //! ```text
 //! cargo run --release --example atlas_overhead -- SCENE [DENSITY...] [--gutter N]
@@ -17,8 +18,11 @@
 
 use std::time::Instant;
 use surfcache::{
-    cache::lightmap::{LightmapSettings, Lightmaps},
-    core::geometry::{orthonormal_basis, triangle_area},
+    cache::{
+        charts::singular_values,
+        lightmap::{LightmapSettings, Lightmaps},
+    },
+    core::geometry::triangle_area,
     io::load_scene,
     trace::TracedScene,
 };
@@ -88,12 +92,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for t in 0..traced.triangle_count() {
             let [a, b, c] = traced.positions[t];
             let area = triangle_area(a, b, c);
-            if area <= 1e-12 {
-                continue;
-            }
             let i = traced.instance[t];
             let [w, h] = maps.texture_size(i);
             let d = maps.texels_per_metre(i);
+            // Triangles under a thousandth of a texel carry no texel of their own.
+            if area * d * d < 1e-3 {
+                continue;
+            }
             let size = glam::Vec2::new(w as f32, h as f32);
             let [p, q, r] = maps.triangle_uv1(t as u32).map(|p| p * size);
             let Some((s_min, s_max)) = singular_values([a, b, c], [p, q, r]) else {
@@ -112,28 +117,4 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     Ok(())
-}
-
-/// Singular values of the linear map from a triangle (metres, in its own plane) to its
-/// texel-space image: the texel density along the least and most stretched directions.
-fn singular_values([a, b, c]: [glam::Vec3; 3], [p, q, r]: [glam::Vec2; 3]) -> Option<(f32, f32)> {
-    let n = (b - a).cross(c - a).try_normalize()?;
-    let (u, v) = orthonormal_basis(n);
-    let e1 = glam::Vec2::new((b - a).dot(u), (b - a).dot(v));
-    let e2 = glam::Vec2::new((c - a).dot(u), (c - a).dot(v));
-    let world = glam::Mat2::from_cols(e1, e2);
-    let det = world.determinant();
-    if det.abs() <= 1e-20 {
-        return None;
-    }
-    let j = glam::Mat2::from_cols(q - p, r - p) * world.inverse();
-    // σ² are the eigenvalues of JᵀJ.
-    let (m00, m01, m11) = (
-        j.x_axis.length_squared(),
-        j.x_axis.dot(j.y_axis),
-        j.y_axis.length_squared(),
-    );
-    let mean = 0.5 * (m00 + m11);
-    let root = (0.25 * (m00 - m11).powi(2) + m01 * m01).sqrt();
-    Some(((mean - root).max(0.0).sqrt(), (mean + root).sqrt()))
 }

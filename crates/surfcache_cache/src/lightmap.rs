@@ -3,7 +3,8 @@
 //!
 //! - **Layout.** An instance whose mesh has a usable TEXCOORD_1 keeps it; its square
 //!   texture has the side √(world area / UV1 area) × density. Otherwise
-//!   [`charts::generate_atlas`] makes one from coplanar charts.
+//!   [`charts::generate_atlas`] makes one (charts grown over smooth edges, flattened and
+//!   packed by footprint).
 //! - **Rasterisation.** Every triangle covers every texel its UV1 footprint overlaps
 //!   (conservative rasterisation, [`conservative_texels`]). A texel belongs to one
 //!   triangle: the one containing its centre, else the nearest; it is estimated at the
