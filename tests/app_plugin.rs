@@ -43,6 +43,7 @@ fn app_plugin_bakes_a_floor_under_a_uniform_sky() {
             },
             seed: 3,
             gather_passes: 0,
+            density_budget: None,
         },
         threads: Some(2),
         ..Default::default()

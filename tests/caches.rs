@@ -17,8 +17,8 @@
 //!
 //! Tolerances: an estimate stops once its relative standard error C = se/(E + ε) is at
 //! most `max_rel_error`; a lookup is a convex combination of estimates, so it lies within
-//! about 4·`max_rel_error`·(E + ε) of the truth (four standard errors), plus RGB9E5
-//! rounding (1/512 of the largest channel). Planes alone in the world see nothing but the
+//! about 4·`max_rel_error`·(E + ε) of the truth (four standard errors), plus half-float
+//! rounding (2⁻¹¹ of each channel). Planes alone in the world see nothing but the
 //! sky, so gathering adds no bias there; in the shadow test every other surface is black.
 
 use serde_json::Value;
@@ -84,11 +84,17 @@ fn bake(
         estimator,
         seed,
         gather_passes: DEFAULT_GATHER_PASSES,
+        density_budget: None,
     });
     while !job.step(scene, 4096) {}
     let floor = job.floor().expect("the job measured the scene");
     let outcome = job.into_outcome().expect("the bake finished");
-    assert_eq!(outcome.passes.len() as u32, DEFAULT_GATHER_PASSES + 1);
+    // A direct pass, at least one bounce pass, at most the default number of them.
+    let passes = outcome.passes.len() as u32;
+    assert!(
+        (2..=DEFAULT_GATHER_PASSES + 1).contains(&passes),
+        "{passes} passes"
+    );
     (outcome.cache().clone(), floor)
 }
 
@@ -109,11 +115,11 @@ fn lookup(cache: &dyn SurfaceCache, scene: &TracedScene, x: Vec3, n: Vec3) -> Ve
     cache.lookup(t, uv, front)
 }
 
-/// |got − expected| ≤ 4·rel·(expected + ε) + max(expected)/256 in every channel.
+/// |got − expected| ≤ 4·rel·(expected + ε) + expected/1024 in every channel.
 #[track_caller]
 fn assert_near(got: Vec3, expected: Vec3, rel: f32, floor: f32, what: &str) {
     for c in 0..3 {
-        let tol = 4.0 * rel * (expected[c] + floor) + expected.max_element() / 256.0 + 1e-6;
+        let tol = 4.0 * rel * (expected[c] + floor) + expected[c] / 1024.0 + 1e-6;
         assert!(
             got.is_finite() && (got[c] - expected[c]).abs() <= tol,
             "{what}: got {got}, expected {expected} (channel {c}, tolerance {tol})"

@@ -2,8 +2,7 @@
 //! caller can spread over frames, cancel, and watch.
 
 use crate::{
-    Cache, CacheSettings, IrradianceMapSettings, Method, SamplePoint, SampleSite, SurfaceCache,
-    UNMAPPED,
+    Cache, CacheSettings, Method, SamplePoint, SampleSite, SurfaceCache, UNMAPPED,
     incremental::{ChangePlan, INDIRECT_SKIP_SHARE},
 };
 use glam::{Vec2, Vec3};
@@ -136,7 +135,18 @@ pub fn estimate_point(
     gather: Option<&dyn IrradianceLookup>,
 ) -> Estimate {
     let (p, origin) = sample_frame(scene, &point.site);
-    estimate(scene, &p, origin, settings, seed, point.key, gather)
+    match point.budget {
+        Some(n) => {
+            let fixed = EstimatorSettings {
+                max_rel_error: 0.0,
+                min_samples: n,
+                max_samples: n,
+                ..*settings
+            };
+            estimate(scene, &p, origin, &fixed, seed, point.key, gather)
+        }
+        None => estimate(scene, &p, origin, settings, seed, point.key, gather),
+    }
 }
 
 /// The scene's mean irradiance (luminance, W/m²) over the front sides of its surfaces,
@@ -200,7 +210,8 @@ pub struct Baker<C: SurfaceCache> {
 impl<C: SurfaceCache> Baker<C> {
     /// A baker for `cache` with per-point estimator `settings` (its `floor` is used as
     /// given: see [`mean_irradiance`]).
-    pub fn new(cache: C, settings: EstimatorSettings, seed: u64) -> Self {
+    pub fn new(mut cache: C, settings: EstimatorSettings, seed: u64) -> Self {
+        cache.plan_sampling(&settings);
         Self {
             cache,
             settings,
@@ -361,8 +372,14 @@ pub struct BakeSettings {
     /// scene's mean irradiance ([`mean_irradiance`]).
     pub estimator: EstimatorSettings,
     pub seed: u64,
-    /// Gathering pre-passes (0: every path is traced to its end). See [`BakeJob`].
+    /// Most bounce passes before the final one (0: no passes, every path of the final
+    /// pass is traced to its end). See [`BakeJob`].
     pub gather_passes: u32,
+    /// Lower the cache's density for large scenes so that one side of all surfaces holds
+    /// about this many samples or texels ([`fitted_density`]); `None` keeps the density
+    /// as set.
+    #[serde(default)]
+    pub density_budget: Option<u64>,
 }
 
 impl Default for BakeSettings {
@@ -375,50 +392,69 @@ impl Default for BakeSettings {
             },
             seed: 0,
             gather_passes: DEFAULT_GATHER_PASSES,
+            density_budget: Some(DEFAULT_DENSITY_BUDGET),
         }
     }
 }
 
-/// Gathering pre-passes by default.
-pub const DEFAULT_GATHER_PASSES: u32 = 2;
+/// Samples or texels on one side of a scene's surfaces by default: 2¹⁹, 8 texels per
+/// metre over a level of 8,000 m² (Crytek Sponza), the caches' full density (64 per
+/// metre) on scenes up to 128 m².
+pub const DEFAULT_DENSITY_BUDGET: u64 = 1 << 19;
 
-/// Settings of gathering pre-pass `k` of `passes` before a final pass with estimator
-/// `final_estimator`: irradiance maps at 1/4 (first of two) or 1/2 (the last) of the
-/// default density, an error bound 5× or 2× the final one (at most 5 %), and at most
-/// 8,192 samples per point in the first, which traces full paths.
-fn pre_pass(
-    k: u32,
-    passes: u32,
-    final_estimator: &EstimatorSettings,
-) -> (CacheSettings, EstimatorSettings) {
-    let last = k + 1 == passes;
-    let defaults = IrradianceMapSettings::default();
-    let maps = IrradianceMapSettings {
-        density: if last {
-            defaults.density / 2.0
+/// The coarsest density (samples or texels per metre) a budget may lower a cache to:
+/// texels of 12.5 cm, what game levels are lightmapped at.
+pub const MIN_FITTED_DENSITY: f32 = 8.0;
+
+/// The density a bake at `density` per metre uses on a scene whose surfaces have `area`
+/// m² (one side) within `budget` samples: `min(density, max(MIN, sqrt(budget / area)))`.
+pub fn fitted_density(density: f32, area: f64, budget: u64) -> f32 {
+    if !(area > 0.0) {
+        return density;
+    }
+    let fit = (budget as f64 / area).sqrt() as f32;
+    density.min(fit.max(MIN_FITTED_DENSITY))
+}
+
+/// Most bounce passes before the final one by default: enough for the bounce series of
+/// any scene whose surfaces reflect at most about 75 % of the light (0.75^16 ≈ 1 %);
+/// passes normally stop earlier, once the series has converged ([`BakeJob`]).
+pub const DEFAULT_GATHER_PASSES: u32 = 16;
+
+/// Bounce passes are baked at this share of the final cache's density (a quarter of
+/// the texels): the light they carry is gathered over whole hemispheres, which smooths it.
+pub const BOUNCE_PASS_DENSITY: f32 = 0.5;
+
+/// Bounce passes stop once the energy the final pass would still leave out, predicted
+/// from the geometric decay of the energy each pass added, is below this share of the
+/// error bound.
+pub const BOUNCE_TAIL_SHARE: f32 = 0.125;
+
+/// Random surface points at which [`BakeJob`] compares consecutive bounce passes.
+pub const BOUNCE_PROBES: u32 = 16_384;
+
+/// Estimator settings of a bounce pass before a final pass with `final_estimator`: 4×
+/// the error bound (at most 10 %), a quarter of the sample limits (at least 16).
+fn bounce_pass_estimator(k: u32, final_estimator: &EstimatorSettings) -> EstimatorSettings {
+    EstimatorSettings {
+        max_rel_error: (final_estimator.max_rel_error * 4.0).min(0.1),
+        min_samples: (final_estimator.min_samples / 4).max(16),
+        max_samples: (final_estimator.max_samples / 4).max(16),
+        // Pass 0 is direct light alone; later passes end every path at its first hit.
+        max_bounces: if k == 0 {
+            Some(0)
         } else {
-            defaults.density / 4.0
-        },
-        floor: final_estimator.floor,
-        ..defaults
-    };
-    let factor = if last { 2.0 } else { 5.0 };
-    let estimator = EstimatorSettings {
-        max_rel_error: (final_estimator.max_rel_error * factor).min(0.05),
-        max_samples: if k == 0 {
-            final_estimator.max_samples.min(8192)
-        } else {
-            final_estimator.max_samples
+            final_estimator.max_bounces
         },
         ..*final_estimator
-    };
-    (CacheSettings::IrradianceMap(maps), estimator)
+    }
 }
 
 /// Where a [`BakeJob`] is.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct JobProgress {
-    /// Pass being baked (0-based) and the number of passes (pre-passes + the final one).
+    /// Pass being baked (0-based) and the number of passes (bounce passes + the final
+    /// one; while bounce passes run, the most there may be).
     pub pass: u32,
     pub passes: u32,
     /// The current pass's progress.
@@ -498,25 +534,43 @@ impl BakeOutcome {
     }
 }
 
-/// A complete bake: the scene-brightness floor, then optional *gathering pre-passes*,
-/// then the requested cache.
+/// A complete bake: the scene-brightness floor, then *bounce passes*, then the requested
+/// cache (docs/design.md, "Baking").
 ///
-/// Final gathering: pre-pass 0 bakes coarse irradiance maps with full paths; every later
-/// pass (pre-pass or final) ends its paths at their first hit y with
-/// `L = L_e(y) + ρ/π · E_prev(y)` from the previous pass ([`IrradianceLookup`]), so
-/// each sample costs one bounce instead of a whole path and carries no deeper-bounce
-/// noise. The result is biased by the previous pass's error at y, averaged over the
-/// hemisphere and scaled by albedo; on the built-in Cornell box two pre-passes keep the
-/// total error within the final pass's own bound at a tenth of the time.
+/// Light is gathered one bounce at a time (final gathering, Jensen 1996; a Jacobi
+/// iteration of the rendering equation over the cache): pass 0 bakes direct light alone
+/// (emission, the environment, punctual lights, next-event estimation, no reflection);
+/// every later pass ends its paths at their first hit y with
+/// `L = L_e(y) + ρ/π · E_prev(y)` from the pass before ([`IrradianceLookup`]), so it holds
+/// one bounce more, and a sample costs one bounce ray plus a shadow ray instead of a
+/// whole path. Bounce passes bake the final method at [`BOUNCE_PASS_DENSITY`] and a
+/// looser error bound ([`bounce_pass_estimator`]); their noise reaches the final cache
+/// only averaged over the hemispheres that gather it.
+///
+/// After every bounce pass k ≥ 1 the light it added, `a_k = mean (Y_k − Y_{k−1}) / (Y_k + ε)`
+/// (luminance of both caches at [`BOUNCE_PROBES`] random surface points, each point's
+/// share of its own irradiance, so that a gallery lit only by bounces counts as much as a
+/// sunlit wall), is compared with the pass before: the series decays like
+/// `r = a_k / a_{k−1}`, so the final pass (one more bounce) leaves out about
+/// `a_k r² / (1 − r)` of a typical point's irradiance. Bounce passes stop once that is below
+/// [`BOUNCE_TAIL_SHARE`] of the error bound, after `--bounces` passes, or after
+/// [`BakeSettings::gather_passes`] passes; the final pass then gathers from the last. The
+/// bias this leaves is that predicted tail (measured in docs/results.md against full
+/// paths). `gather_passes = 0` traces every path of the final pass to its end (Russian
+/// roulette, the thesis' model).
 ///
 /// Re-bakes after an edit are [`crate::incremental::IncrementalJob`]s.
 pub struct BakeJob {
     settings: BakeSettings,
     baker: Option<Baker<Cache>>,
-    pass: u32,
+    /// Whether the running pass is the final one.
+    final_pass: bool,
     floor: Option<f32>,
     done: JobProgress,
     passes: Vec<Arc<Cache>>,
+    /// Energy each finished bounce pass added (`a_k`, module docs).
+    added: Vec<f64>,
+    probes: Vec<(u32, Vec2, bool)>,
 }
 
 impl BakeJob {
@@ -524,13 +578,18 @@ impl BakeJob {
         Self {
             settings,
             baker: None,
-            pass: 0,
+            final_pass: false,
             floor: (settings.estimator.floor > 0.0).then_some(settings.estimator.floor),
             done: JobProgress {
-                passes: settings.gather_passes + 1,
+                passes: settings
+                    .gather_passes
+                    .min(settings.estimator.max_bounces.unwrap_or(u32::MAX))
+                    + 1,
                 ..Default::default()
             },
             passes: Vec::new(),
+            added: Vec::new(),
+            probes: Vec::new(),
         }
     }
 
@@ -549,27 +608,100 @@ impl BakeJob {
         s
     }
 
+    /// Bounce passes this bake may run at most (`gather_passes`, and `--bounces` of them).
+    fn most_bounce_passes(&self) -> u32 {
+        let s = &self.settings;
+        s.gather_passes
+            .min(s.estimator.max_bounces.unwrap_or(u32::MAX))
+    }
+
+    /// Whether the bounce series has converged after the passes so far (module docs).
+    fn bounces_converged(&self) -> bool {
+        let k = self.added.len();
+        if k < 2 {
+            return false;
+        }
+        let (a, before) = (self.added[k - 1].max(0.0), self.added[k - 2].max(0.0));
+        let r = if before > 0.0 {
+            (a / before).min(0.95)
+        } else {
+            0.0
+        };
+        let tail = a * r * r / (1.0 - r);
+        tail <= (BOUNCE_TAIL_SHARE * self.settings.estimator.max_rel_error) as f64
+    }
+
     fn start_pass(&mut self, scene: &TracedScene) {
         let s = self.settings();
-        let passes = s.gather_passes;
-        let k = self.pass as usize;
-        let (cache_settings, estimator) = if self.pass < passes {
-            pre_pass(self.pass, passes, &s.estimator)
+        let k = self.passes.len() as u32;
+        self.final_pass = k >= self.most_bounce_passes() || self.bounces_converged();
+        let (cache_settings, estimator) = if self.final_pass {
+            let mut estimator = s.estimator;
+            if k > 0 {
+                // Gathering ends every path at its first hit: the bounces are in the passes.
+                estimator.max_bounces = None;
+            }
+            (s.cache, estimator)
         } else {
-            (s.cache, s.estimator)
+            let mut cache = s.cache;
+            cache.scale_density(BOUNCE_PASS_DENSITY);
+            (cache, bounce_pass_estimator(k, &s.estimator))
         };
-        // Pre-passes draw from streams of their own.
-        let seed = if self.pass < passes {
-            s.seed ^ splitmix64(0x6761_7468_6572 + self.pass as u64)
-        } else {
+        // Bounce passes draw from streams of their own.
+        let seed = if self.final_pass {
             s.seed
+        } else {
+            s.seed ^ splitmix64(0x6761_7468_6572 + k as u64)
         };
-        let previous_pass = k.checked_sub(1).and_then(|p| self.passes.get(p)).cloned();
         let mut baker = Baker::new(Cache::new(scene, &cache_settings), estimator, seed);
-        if let Some(prev) = previous_pass {
+        if let Some(prev) = self.passes.last().cloned() {
             baker = baker.with_gather(prev);
         }
+        self.done.passes = if self.final_pass {
+            k + 1
+        } else {
+            self.most_bounce_passes() + 1
+        };
         self.baker = Some(baker);
+    }
+
+    /// Random surface points (both sides where the cache bakes both) at which bounce
+    /// passes are compared, by area.
+    fn probe_points(&mut self, scene: &TracedScene) {
+        if !self.probes.is_empty() || scene.triangle_count() == 0 {
+            return;
+        }
+        let areas = scene.area_distribution();
+        let both = self.settings.cache.both_sides();
+        let mut rng = Rng::new(self.settings.seed ^ 0x9806_e5, 0);
+        self.probes = (0..BOUNCE_PROBES)
+            .map(|_| {
+                let (t, _, _) = areas.sample(rng.next_f32());
+                let uv = surfcache_core::sampling::uniform_triangle(rng.next_vec2());
+                let front = !both || rng.next_f32() < 0.5;
+                (t as u32, uv, front)
+            })
+            .collect();
+    }
+
+    /// `a_k` of the pass just finished (module docs).
+    fn energy_added(&self) -> f64 {
+        let k = self.passes.len();
+        let Some(latest) = self.passes.last() else {
+            return 0.0;
+        };
+        let before = k.checked_sub(2).map(|p| &self.passes[p]);
+        let floor = self.floor.unwrap_or(0.0) as f64;
+        let (mut sum, mut count) = (0.0f64, 0u32);
+        for &(t, uv, front) in &self.probes {
+            let now = luminance(latest.lookup(t, uv, front)) as f64;
+            let was = before.map_or(0.0, |b| luminance(b.lookup(t, uv, front)) as f64);
+            if now.is_finite() && was.is_finite() {
+                sum += (now - was) / (now.abs() + floor).max(f64::MIN_POSITIVE);
+                count += 1;
+            }
+        }
+        sum / count.max(1) as f64
     }
 
     /// Estimates up to `max_points` points (the first call of a fresh bake measures the
@@ -579,34 +711,45 @@ impl BakeJob {
             return true;
         }
         if self.floor.is_none() {
+            if let (Some(budget), Some(density)) =
+                (self.settings.density_budget, self.settings.cache.density())
+            {
+                let area = scene.area_distribution().total();
+                self.settings
+                    .cache
+                    .set_density(fitted_density(density, area, budget));
+                self.settings.density_budget = None;
+            }
             let mean = mean_irradiance(scene, 512, self.settings.seed);
             self.floor = Some((FLOOR_FRACTION * mean).max(f32::MIN_POSITIVE));
             return false;
         }
         if self.baker.is_none() {
+            self.probe_points(scene);
             self.start_pass(scene);
         }
-        let Some(cache) = step_pass(
-            &mut self.baker,
-            scene,
-            max_points,
-            self.pass,
-            &mut self.done,
-        ) else {
+        let pass = self.passes.len() as u32;
+        let Some(cache) = step_pass(&mut self.baker, scene, max_points, pass, &mut self.done)
+        else {
             return false;
         };
         self.passes.push(Arc::new(cache));
-        if self.pass == self.settings.gather_passes {
+        if self.final_pass {
             self.done.finished = true;
             return true;
         }
-        self.pass += 1;
+        let a = self.energy_added();
+        if std::env::var_os(TRACE_PASSES_VAR).is_some() {
+            eprintln!("[pass {pass}] energy added {:.5}", a);
+        }
+        self.added.push(a);
         false
     }
 
     /// Progress so far.
     pub fn progress(&self) -> JobProgress {
-        self.done.with_running(self.pass, self.baker.as_ref())
+        self.done
+            .with_running(self.passes.len() as u32, self.baker.as_ref())
     }
 
     /// Every pass's cache and the settings, once [`Self::step`] returned true.

@@ -80,9 +80,10 @@
 //! the test unseen between the valid samples. A grid buried everywhere shows nothing and
 //! does not refine. Buried samples are counted in [`CacheStats::buried`].
 //!
-//! **Storage.** Samples are RGB9E5 (4 bytes, [`Rgb9e5Scale`] chosen from the largest
+//! **Storage.** Samples are three half floats (6 bytes, [`crate::stored_rgb`], one
+//! [`StoreScale`] chosen from the largest
 //! stored value), grid by grid; a grid slot `2·triangle + side` (side 0 = front) has a
-//! `u32` offset and a `u8` level `log2(order) + 1` (0 = not baked). `cache_bytes = 4·samples +
+//! `u32` offset and a `u8` level `log2(order) + 1` (0 = not baked). `cache_bytes = 6·samples +
 //! 5·grid slots + 4` (the last 4: the scale). Estimates' f32 values, standard errors and
 //! burial flags live only while baking.
 //!
@@ -116,7 +117,8 @@
 
 use crate::{
     CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
-    UNMAPPED, mesh_colour, rgb9e5::Rgb9e5Scale,
+    UNMAPPED, crossings, mesh_colour,
+    stored_rgb::{STORED_RGB_BYTES, StoreScale, StoredRgb},
 };
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
@@ -456,7 +458,8 @@ struct Working {
     /// Order (log2) of each grid slot's first round; empty: `min(2, n_max)` everywhere.
     start_log2: Vec<u8>,
     /// Grid slots whose punctual lights' shadow boundary crosses them
-    /// ([`punctual_shadow_edges`]): they refine to their maximum order.
+    /// ([`punctual_shadow_edges`]) or that another surface crosses ([`crossed_grids`]):
+    /// they refine to their maximum order.
     shadow_edges: Vec<bool>,
     /// Corner links: `links[3·slot + k]` is `3·slot' + k'` when corner k of grid `slot`
     /// takes the estimate of corner k' of grid `slot'`, its representative, or
@@ -481,6 +484,23 @@ impl Working {
             None => (self.max_orders[g / 2] >= 2) as u8,
         }
     }
+}
+
+/// Grid slots (`2·triangle + side`, among those `bake` marks) that another surface
+/// crosses or touches ([`crossings::grid_crossed`] at the order the grid starts at,
+/// `min(2, n_max)`). Such a grid refines to its maximum order whatever its samples say:
+/// when all its coarse samples lie on one side of the crossing (the lit overhang of a wall
+/// that pierces its neighbour, the thesis' known failure) they agree, and the refinement
+/// test sees nothing to refine. Costs [`crossings::PROBE_DIRECTIONS`] rays per point.
+pub fn crossed_grids(scene: &TracedScene, max_orders: &[u32], bake: &[bool]) -> Vec<bool> {
+    use rayon::prelude::*;
+    (0..bake.len())
+        .into_par_iter()
+        .map(|g| {
+            let t = (g / 2) as u32;
+            bake[g] && crossings::grid_crossed(scene, t, g % 2 == 0, max_orders[t as usize].min(2))
+        })
+        .collect()
 }
 
 /// Grid slots (`2·triangle + side`, among those `bake` marks) that a hard shadow of a
@@ -540,13 +560,13 @@ pub struct IrradianceMaps {
     levels: Vec<u8>,
     /// First sample of each grid slot in `packed`.
     offsets: Vec<u32>,
-    /// RGB9E5 samples, grid by grid, each in [`grid_index`] order.
-    packed: Vec<u32>,
+    /// Stored samples, grid by grid, each in [`grid_index`] order.
+    packed: Vec<StoredRgb>,
     /// Hemisphere samples behind each stored sample (diagnostics only; not part of
     /// `cache_bytes`).
     #[serde(default)]
     sample_counts: Vec<u32>,
-    scale: Rgb9e5Scale,
+    scale: StoreScale,
     totals: EstimateTotals,
     buried: u64,
     #[serde(skip)]
@@ -574,7 +594,14 @@ impl IrradianceMaps {
                 g % 2 == 0 || settings.both_sides || scene.material_of((g / 2) as u32).double_sided
             })
             .collect();
-        let shadow_edges = punctual_shadow_edges(scene, &max_orders, &refine);
+        let mut shadow_edges = punctual_shadow_edges(scene, &max_orders, &refine);
+        for (forced, crossed) in
+            shadow_edges
+                .iter_mut()
+                .zip(crossed_grids(scene, &max_orders, &refine))
+        {
+            *forced |= crossed;
+        }
         let links = if settings.share_corners {
             corner_links(scene, settings.share_angle.to_radians().cos(), &refine)
         } else {
@@ -586,7 +613,7 @@ impl IrradianceMaps {
             offsets: vec![0; 2 * triangles],
             packed: Vec::new(),
             sample_counts: Vec::new(),
-            scale: Rgb9e5Scale::default(),
+            scale: StoreScale::default(),
             totals: EstimateTotals::default(),
             buried: 0,
             working: Some(Box::new(Working {
@@ -777,6 +804,7 @@ impl SurfaceCache for IrradianceMaps {
                     },
                     key: sample_key(key, front, i, j, n),
                     prior: prior_base.map(|b| w.priors[b + m]),
+                    budget: None,
                 });
             });
         }
@@ -905,9 +933,9 @@ impl SurfaceCache for IrradianceMaps {
         // Priors serve the first round only.
         w.priors = Vec::new();
         w.prior_offsets = Vec::new();
-        // Pack: RGB9E5 with a scale for the largest value.
+        // Pack: half floats with a scale for the largest value.
         let max = w.filled.iter().fold(0.0f32, |m, v| m.max(v.max_element()));
-        self.scale = Rgb9e5Scale::for_max(max);
+        self.scale = StoreScale::for_max(max);
         self.packed.clear();
         self.packed
             .extend(w.filled.iter().map(|&v| self.scale.pack(v)));
@@ -993,7 +1021,9 @@ impl SurfaceCache for IrradianceMaps {
             }
         }
         CacheStats {
-            cache_bytes: 4 * self.packed.len() as u64 + 5 * self.levels.len() as u64 + 4,
+            cache_bytes: STORED_RGB_BYTES * self.packed.len() as u64
+                + 5 * self.levels.len() as u64
+                + 4,
             order_histogram,
             buried: self.buried,
             ..self.totals.stats()

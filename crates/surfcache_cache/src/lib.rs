@@ -18,18 +18,20 @@ pub mod archive;
 pub mod atlas;
 pub mod bake;
 pub mod charts;
+pub mod crossings;
+pub mod filter;
 pub mod incremental;
 pub mod irradiance_map;
 pub mod lightmap;
 pub mod mesh_colour;
-pub mod rgb9e5;
+pub mod stored_rgb;
 pub mod texture;
 pub mod vertex_lighting;
 
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use surfcache_trace::{Estimate, IrradianceLookup, TracedScene};
+use surfcache_trace::{Estimate, EstimatorSettings, IrradianceLookup, TracedScene};
 
 pub use irradiance_map::{IrradianceMapSettings, IrradianceMaps};
 pub use lightmap::{LightmapSettings, Lightmaps};
@@ -96,6 +98,10 @@ pub struct SamplePoint {
     /// In the first round of an incremental re-bake ([`SurfaceCache::remap`]): the value
     /// before the edit, to be updated by the estimated change rather than re-estimated.
     pub prior: Option<Vec3>,
+    /// Exactly this many hemisphere samples, whatever their error (the cache decides
+    /// where more are needed, e.g. after filtering); `None`: the estimator's own stopping
+    /// rule.
+    pub budget: Option<u32>,
 }
 
 /// Figures every cache reports (`report.json`).
@@ -124,6 +130,10 @@ pub struct CacheStats {
 pub trait SurfaceCache: Send + Sync {
     /// The method this cache implements.
     fn method(&self) -> Method;
+
+    /// Called once before the first round with the estimator the baker will use, for
+    /// caches that plan their own rounds of samples ([`lightmap`]). The default ignores it.
+    fn plan_sampling(&mut self, _estimator: &EstimatorSettings) {}
 
     /// Appends the sample points of the next round to `points`; appends nothing once the
     /// cache has converged.
@@ -254,6 +264,35 @@ impl CacheSettings {
         }
     }
 
+    /// Whether both sides of every surface are baked.
+    pub fn both_sides(&self) -> bool {
+        match self {
+            Self::Vertex(s) => s.both_sides,
+            Self::IrradianceMap(s) => s.both_sides,
+            Self::Lightmap(s) => s.both_sides,
+        }
+    }
+
+    /// The spatial density (irradiance-map samples or lightmap texels per metre; `None`
+    /// for vertex lighting).
+    pub fn density(&self) -> Option<f32> {
+        match self {
+            Self::Vertex(_) => None,
+            Self::IrradianceMap(s) => Some(s.density),
+            Self::Lightmap(s) => Some(s.texels_per_metre),
+        }
+    }
+
+    /// Multiplies the spatial density (irradiance-map samples or lightmap texels per
+    /// metre) by `factor` (vertex lighting has none).
+    pub fn scale_density(&mut self, factor: f32) {
+        match self {
+            Self::Vertex(_) => {}
+            Self::IrradianceMap(s) => s.density *= factor,
+            Self::Lightmap(s) => s.texels_per_metre *= factor,
+        }
+    }
+
     /// The irradiance-map refinement bound (ignored by the other caches).
     pub fn set_interpolation_error(&mut self, bound: f32) {
         if let Self::IrradianceMap(s) = self {
@@ -310,6 +349,10 @@ impl Cache {
 impl SurfaceCache for Cache {
     fn method(&self) -> Method {
         self.inner().method()
+    }
+
+    fn plan_sampling(&mut self, estimator: &EstimatorSettings) {
+        self.inner_mut().plan_sampling(estimator)
     }
 
     fn next_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>) {

@@ -16,13 +16,16 @@
 //!   inside other geometry) are refilled from valid neighbours, and texels owned by no
 //!   triangle are **dilated** from their neighbours `gutter` times, so that bilinear
 //!   filtering at chart borders never pulls in black.
-//! - **Storage.** RGB9E5 (4 bytes a texel) with one power-of-two [`Rgb9e5Scale`].
+//! - **Storage.** Three half floats a texel ([`crate::stored_rgb`]) with one power-of-two
+//!   [`StoreScale`].
 
 use crate::{
     CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
     UNMAPPED,
     charts::{self, TEXEL_EPSILON},
-    rgb9e5::Rgb9e5Scale,
+    crossings::{self, CrossingLine, Probe},
+    filter::{self, FilterInput, FilterSettings},
+    stored_rgb::{STORED_RGB_BYTES, StoreScale, StoredRgb},
 };
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -31,7 +34,7 @@ use surfcache_core::{
     geometry::{closest_point_barycentric, interpolate, triangle_area},
     sampling::splitmix64,
 };
-use surfcache_trace::{Estimate, TracedScene};
+use surfcache_trace::{Estimate, EstimatorSettings, TracedScene};
 
 /// How lightmaps are laid out and which texels are trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -58,6 +61,10 @@ pub struct LightmapSettings {
     /// this is buried in geometry and refilled from its neighbours. Default 0.5; above 1
     /// turns detection off.
     pub buried_threshold: f32,
+    /// How far texels share their samples with their neighbours ([`crate::filter`]) when
+    /// the bake plans rounds ([`SurfaceCache::plan_sampling`]).
+    #[serde(default)]
+    pub filter: FilterSettings,
 }
 
 impl Default for LightmapSettings {
@@ -68,6 +75,7 @@ impl Default for LightmapSettings {
             gutter: 1,
             both_sides: true,
             buried_threshold: 0.5,
+            filter: FilterSettings::default(),
         }
     }
 }
@@ -82,6 +90,8 @@ const INSIDE_MARGIN: f32 = 1e-4;
 const EMPTY: u8 = 0;
 const VALID: u8 = 1;
 const BURIED: u8 = 2;
+/// Buried, moved to the visible part of its footprint, waiting for a fresh estimate.
+const MOVED: u8 = 3;
 
 /// One instance's texture within the flat texel arrays of a layer.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -129,14 +139,44 @@ pub struct Lightmaps {
     buried_slots: Vec<bool>,
     /// Texel slot (layer · layer_texels + texel) of each point of the round.
     slots: Vec<u32>,
+    /// How rounds of samples are planned ([`SurfaceCache::plan_sampling`]).
+    #[serde(skip)]
+    plan: Option<SamplingPlan>,
+    /// Rounds asked for so far, and the slots and sample budgets of the next one.
+    #[serde(skip)]
+    rounds: u32,
+    #[serde(skip)]
+    pending: Vec<(u32, u32)>,
+    /// Every round's estimates merged per slot while baking.
+    #[serde(skip)]
+    merged: Vec<TexelEstimate>,
+    #[serde(skip)]
+    state: Vec<u8>,
+    /// Sample point and shading normal of every owned slot (the filter's guides).
+    #[serde(skip)]
+    guide: Vec<(Vec3, Vec3)>,
+    /// Where each slot is estimated (barycentrics on its owner; a buried texel moves to
+    /// the visible part of its footprint, [`crossings`]), and the exit its probe found.
+    #[serde(skip)]
+    site_uv: Vec<Vec2>,
+    #[serde(skip)]
+    exits: Vec<Option<Vec2>>,
+    /// Per slot: index into `crossing_lines` of the crossing that cuts its footprint, or
+    /// [`NONE`]; lookups leave out texels whose crossing separates them from the point
+    /// looked up (module docs, Crossings).
+    #[serde(default)]
+    crossing_slot: Vec<u32>,
+    /// Crossing lines in UV1 space: `a·u + b·v + c ≥ 0` on the texel's own side.
+    #[serde(default)]
+    crossing_lines: Vec<[f32; 3]>,
     emitted: bool,
-    /// RGB9E5 texels of all layers.
-    packed: Vec<u32>,
+    /// Stored texels of all layers.
+    packed: Vec<StoredRgb>,
     /// Hemisphere samples per texel of all layers (diagnostics only, not in
     /// `cache_bytes`; 0 for texels filled from neighbours).
     #[serde(default)]
     sample_counts: Vec<u32>,
-    scale: Rgb9e5Scale,
+    scale: StoreScale,
     stats: CacheStats,
 }
 
@@ -200,10 +240,20 @@ impl Lightmaps {
             priors: Vec::new(),
             buried_slots: Vec::new(),
             slots: Vec::new(),
+            plan: None,
+            rounds: 0,
+            pending: Vec::new(),
+            merged: Vec::new(),
+            state: Vec::new(),
+            guide: Vec::new(),
+            site_uv: Vec::new(),
+            exits: Vec::new(),
+            crossing_slot: Vec::new(),
+            crossing_lines: Vec::new(),
             emitted: false,
-            packed: vec![0; layers * layer_texels],
+            packed: vec![[0; 3]; layers * layer_texels],
             sample_counts: Vec::new(),
-            scale: Rgb9e5Scale::default(),
+            scale: StoreScale::default(),
             stats: CacheStats::default(),
         }
     }
@@ -279,10 +329,300 @@ impl Lightmaps {
     }
 
     /// The texels of one layer of one instance.
-    fn texture_slice(&self, layer: usize, instance: usize) -> &[u32] {
+    fn texture_slice(&self, layer: usize, instance: usize) -> &[StoredRgb] {
         let m = &self.maps[instance];
         let start = layer * self.layer_texels + m.offset;
         &self.packed[start..start + m.texels()]
+    }
+}
+
+/// How a lightmap plans its rounds of samples (module docs, Rounds), from the bake's
+/// estimator settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SamplingPlan {
+    /// Samples of every texel in the first round (the estimator's `min_samples`).
+    pub first: u32,
+    /// Most samples of one texel over all rounds.
+    pub max: u32,
+    /// Bound on the filtered estimate's relative error, per channel (0: one round).
+    pub bound: f32,
+    /// The absolute floor ε of relative errors (W/m²).
+    pub floor: f32,
+    pub filter: FilterSettings,
+}
+
+impl SamplingPlan {
+    fn new(estimator: &EstimatorSettings, settings: &LightmapSettings) -> Self {
+        let max = estimator.max_samples.max(1);
+        Self {
+            first: if estimator.max_rel_error > 0.0 {
+                estimator.min_samples.clamp(1, max)
+            } else {
+                max
+            },
+            max,
+            bound: estimator.max_rel_error,
+            floor: estimator.floor,
+            filter: settings.filter,
+        }
+    }
+
+    /// C = σ / (E + ε), the largest over the channels, of a (filtered) estimate with
+    /// value `v` and variance `s`.
+    fn relative_error(&self, v: Vec3, s: Vec3) -> f32 {
+        let c = s.max(Vec3::ZERO).map(f32::sqrt) / (v.max(Vec3::ZERO) + Vec3::splat(self.floor));
+        c.max_element()
+    }
+}
+
+/// The estimates of one texel over all rounds, merged.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct TexelEstimate {
+    samples: u32,
+    mean: Vec3,
+    /// Variance of the mean, per channel.
+    variance: Vec3,
+}
+
+impl TexelEstimate {
+    /// Merges an independent estimate of the same texel: means weighted by sample
+    /// counts, `σ² = (n_a² σ_a² + n_b² σ_b²) / (n_a + n_b)²`. An estimate that is exactly
+    /// zero (every sample was zero: in a gathering pass every ray met unlit surfaces)
+    /// counts as exact.
+    fn merge(&mut self, e: &Estimate) {
+        let variance = if e.value == Vec3::ZERO {
+            Vec3::ZERO
+        } else {
+            e.std_error * e.std_error
+        };
+        let (na, nb) = (self.samples as f32, e.samples as f32);
+        let n = na + nb;
+        if n == 0.0 {
+            return;
+        }
+        self.mean = (self.mean * na + e.value * nb) / n;
+        self.variance = (self.variance * na * na + variance * nb * nb) / (n * n);
+        self.samples += e.samples;
+    }
+}
+
+impl Lightmaps {
+    /// The sample point of texel `i` of `layer` in `round` (its key differs per round, so
+    /// rounds are independent estimates), with `budget` samples.
+    fn texel_point(
+        &self,
+        scene: &TracedScene,
+        layer: usize,
+        i: usize,
+        round: u32,
+        budget: Option<u32>,
+    ) -> SamplePoint {
+        let triangle = self.owner[i];
+        let m = self.maps[self.triangle_instance[triangle as usize] as usize];
+        let k = (i - m.offset) as u32;
+        let (x, y) = (k % m.width, k / m.width);
+        let key = texel_key(scene.triangle_key(triangle), layer, x, y);
+        let uv = self
+            .site_uv
+            .get(layer * self.layer_texels + i)
+            .copied()
+            .unwrap_or(self.sample_uv[i]);
+        SamplePoint {
+            site: SampleSite::Surface {
+                triangle,
+                uv,
+                front: layer == 0,
+            },
+            key: if round == 0 {
+                key
+            } else {
+                splitmix64(key ^ round as u64)
+            },
+            prior: self
+                .priors
+                .get(layer * self.layer_texels + i)
+                .copied()
+                .flatten(),
+            budget,
+        }
+    }
+
+    /// Sample point and shading normal of every owned slot (zero elsewhere).
+    fn texel_guides(&self, scene: &TracedScene) -> Vec<(Vec3, Vec3)> {
+        (0..self.layers * self.layer_texels)
+            .into_par_iter()
+            .map(|slot| {
+                let (layer, i) = (slot / self.layer_texels, slot % self.layer_texels);
+                match self.owner[i] {
+                    NONE => (Vec3::ZERO, Vec3::ZERO),
+                    t => {
+                        let p = scene.surface_point(t, self.site_uv[slot], layer == 0);
+                        (p.position, p.shading_normal)
+                    }
+                }
+            })
+            .collect()
+    }
+
+    /// The merged estimates, filtered texture by texture when `plan` filters (else as
+    /// they are): value and variance per slot.
+    fn filtered(&self, plan: Option<&SamplingPlan>) -> Vec<(Vec3, Vec3)> {
+        let mut out: Vec<(Vec3, Vec3)> = self.merged.iter().map(|e| (e.mean, e.variance)).collect();
+        let Some(plan) = plan.filter(|p| p.filter.iterations > 0) else {
+            return out;
+        };
+        for layer in 0..self.layers {
+            for m in &self.maps {
+                let range = layer * self.layer_texels + m.offset
+                    ..layer * self.layer_texels + m.offset + m.texels();
+                let value: Vec<Vec3> = out[range.clone()].iter().map(|v| v.0).collect();
+                let variance: Vec<Vec3> = out[range.clone()].iter().map(|v| v.1).collect();
+                let position: Vec<Vec3> = self.guide[range.clone()].iter().map(|g| g.0).collect();
+                let normal: Vec<Vec3> = self.guide[range.clone()].iter().map(|g| g.1).collect();
+                // Crossed texels keep their own estimates: their neighbours may lie beyond
+                // the crossing.
+                let valid: Vec<bool> = range
+                    .clone()
+                    .map(|k| {
+                        self.state[k] == VALID
+                            && self.crossing_slot.get(k).is_none_or(|&c| c == NONE)
+                    })
+                    .collect();
+                let (v, s) = filter::filter(
+                    &FilterInput {
+                        width: m.width as usize,
+                        height: m.height as usize,
+                        value: &value,
+                        variance: &variance,
+                        position: &position,
+                        normal: &normal,
+                        valid: &valid,
+                        texel: 1.0 / m.texels_per_metre.max(f32::MIN_POSITIVE),
+                        floor: plan.floor,
+                    },
+                    &plan.filter,
+                );
+                for (o, vs) in out[range].iter_mut().zip(v.into_iter().zip(s)) {
+                    *o = vs;
+                }
+            }
+        }
+        out
+    }
+
+    /// After the last round: statistics, buried texels refilled from valid neighbours,
+    /// dilation into the gutters, packing ([`crate::stored_rgb`]); the working state is dropped.
+    fn finish(&mut self, mut values: Vec<Vec3>, plan: Option<&SamplingPlan>) {
+        let total = self.layers * self.layer_texels;
+        let mut state = std::mem::take(&mut self.state);
+        let merged = std::mem::take(&mut self.merged);
+        let mut stats = CacheStats::default();
+        let mut rel_error = 0.0f64;
+        self.sample_counts = merged.iter().map(|e| e.samples).collect();
+        for (slot, e) in merged.iter().enumerate() {
+            if e.samples == 0 {
+                continue;
+            }
+            stats.sample_points += 1;
+            stats.samples += e.samples as u64;
+            stats.max_samples_per_point = stats.max_samples_per_point.max(e.samples);
+            match state[slot] {
+                BURIED => stats.buried += 1,
+                _ => {
+                    let floor = plan.map_or(0.0, |p| p.floor).max(f32::MIN_POSITIVE);
+                    let c =
+                        e.variance.map(f32::sqrt) / (e.mean.max(Vec3::ZERO) + Vec3::splat(floor));
+                    rel_error += c.max_element() as f64;
+                }
+            }
+        }
+        stats.mean_rel_error = rel_error / (stats.sample_points - stats.buried).max(1) as f64;
+        self.buried_slots = state.iter().map(|&st| st == BURIED).collect();
+        // Chart of each texel of a layer (for the same-chart preference of the fill).
+        let texel_chart: Vec<u32> = self
+            .owner
+            .iter()
+            .map(|&t| {
+                if t == NONE {
+                    NONE
+                } else {
+                    self.chart[t as usize]
+                }
+            })
+            .collect();
+        for layer in 0..self.layers {
+            for m in &self.maps {
+                let range = layer * self.layer_texels + m.offset
+                    ..layer * self.layer_texels + m.offset + m.texels();
+                let (w, h) = (m.width as usize, m.height as usize);
+                let chart = &texel_chart[m.offset..m.offset + m.texels()];
+                fill_buried(
+                    &mut values[range.clone()],
+                    &mut state[range.clone()],
+                    chart,
+                    w,
+                    h,
+                );
+                stats.dilated_texels += dilate(
+                    &mut values[range.clone()],
+                    &mut state[range],
+                    w,
+                    h,
+                    self.settings.gutter,
+                );
+            }
+        }
+        let max = values
+            .iter()
+            .map(|v| v.max_element())
+            .fold(0.0f32, f32::max);
+        self.scale = StoreScale::for_max(max);
+        self.packed = values.iter().map(|&v| self.scale.pack(v)).collect();
+        // UV1: three f32 pairs per triangle corner (a generated layout needs a vertex per
+        // corner); the per-triangle instance index is the engine's mesh binding.
+        stats.cache_bytes = STORED_RGB_BYTES * total as u64 + 24 * self.uv1.len() as u64;
+        self.stats = stats;
+        self.slots = Vec::new();
+        self.priors = Vec::new();
+        self.guide = Vec::new();
+        self.pending = Vec::new();
+        self.site_uv = Vec::new();
+        self.exits = Vec::new();
+    }
+
+    /// Probes every owned slot for crossings within its texel's footprint
+    /// ([`crossings::probe`], reach ¾ of a texel): records exits for buried texels and
+    /// each crossing as a line in UV1 space for lookups.
+    fn probe_crossings(&mut self, scene: &TracedScene) {
+        let total = self.layers * self.layer_texels;
+        let probes: Vec<(Vec2, Probe)> = (0..total)
+            .into_par_iter()
+            .map(|slot| {
+                let (layer, i) = (slot / self.layer_texels, slot % self.layer_texels);
+                let uv = self.sample_uv[i];
+                match self.owner[i] {
+                    NONE => (uv, Probe::default()),
+                    t => {
+                        let m = &self.maps[self.triangle_instance[t as usize] as usize];
+                        let reach = 0.75 / m.texels_per_metre.max(f32::MIN_POSITIVE);
+                        (uv, crossings::probe(scene, t, uv, layer == 0, reach))
+                    }
+                }
+            })
+            .collect();
+        self.site_uv = probes.iter().map(|(uv, _)| *uv).collect();
+        self.exits = probes.iter().map(|(_, p)| p.exit).collect();
+        self.crossing_slot = vec![NONE; total];
+        self.crossing_lines.clear();
+        for (slot, (uv, probe)) in probes.iter().enumerate() {
+            let Some(line) = probe.crossing else { continue };
+            let t = self.owner[slot % self.layer_texels];
+            let Some(l) = uv1_line(scene, t, self.uv1[t as usize], *uv, &line) else {
+                continue;
+            };
+            self.crossing_slot[slot] = self.crossing_lines.len() as u32;
+            self.crossing_lines.push(l);
+        }
     }
 }
 
@@ -565,19 +905,75 @@ fn dilate(values: &mut [Vec3], state: &mut [u8], w: usize, h: usize, passes: u32
     filled
 }
 
-/// Bilinear lookup with clamp-to-edge in RGB9E5 texels, arithmetic identical to
-/// [`crate::texture::bilinear`] on the unpacked image (what the GPU sampler computes).
+/// Bilinear lookup with clamp-to-edge in stored texels, arithmetic identical to
+/// [`crate::texture::bilinear`] on the unpacked image (what the GPU sampler computes),
+/// except that texels `same_side(k)` rejects (a crossing separates them from the point
+/// looked up) are left out and the others' weights renormalised; where every texel is
+/// rejected the plain bilinear value is returned.
 #[inline]
-fn bilinear_packed(texels: &[u32], width: u32, height: u32, uv: Vec2, scale: Rgb9e5Scale) -> Vec3 {
+fn bilinear_packed(
+    texels: &[StoredRgb],
+    width: u32,
+    height: u32,
+    uv: Vec2,
+    scale: StoreScale,
+    same_side: impl Fn(usize) -> bool,
+) -> Vec3 {
     let x = (uv.x * width as f32 - 0.5).clamp(0.0, (width - 1) as f32);
     let y = (uv.y * height as f32 - 0.5).clamp(0.0, (height - 1) as f32);
     let (x0, y0) = (x.floor() as u32, y.floor() as u32);
     let (x1, y1) = ((x0 + 1).min(width - 1), (y0 + 1).min(height - 1));
     let (fx, fy) = (x - x0 as f32, y - y0 as f32);
-    let t = |i: u32, j: u32| scale.unpack(texels[(j * width + i) as usize]);
-    let top = t(x0, y0) * (1.0 - fx) + t(x1, y0) * fx;
-    let bottom = t(x0, y1) * (1.0 - fx) + t(x1, y1) * fx;
-    top * (1.0 - fy) + bottom * fy
+    let taps = [
+        (x0, y0, (1.0 - fx) * (1.0 - fy)),
+        (x1, y0, fx * (1.0 - fy)),
+        (x0, y1, (1.0 - fx) * fy),
+        (x1, y1, fx * fy),
+    ];
+    let (mut sum, mut weight, mut plain) = (Vec3::ZERO, 0.0f32, Vec3::ZERO);
+    for (i, j, w) in taps {
+        let k = (j * width + i) as usize;
+        let v = scale.unpack(texels[k]);
+        plain += v * w;
+        if w > 0.0 && same_side(k) {
+            sum += v * w;
+            weight += w;
+        }
+    }
+    if weight > 0.0 { sum / weight } else { plain }
+}
+
+/// A crossing line of the footprint of the texel sampled at barycentrics `uv` of
+/// triangle `t` (UV1 corners `uv1`), in UV1 space: `[a, b, c]` with `a·u + b·v + c` the
+/// signed distance (UV units), positive on the sample's side; `None` if it cannot be
+/// mapped (a degenerate UV1 triangle).
+fn uv1_line(
+    scene: &TracedScene,
+    t: u32,
+    uv1: [Vec2; 3],
+    uv: Vec2,
+    line: &CrossingLine,
+) -> Option<[f32; 3]> {
+    let [a, b, c] = scene.positions[t as usize];
+    let mu = scene.geometric_normals[t as usize];
+    let along = mu.cross(line.normal);
+    let to_uv1 = |x: Vec3| {
+        let bary = surfcache_core::geometry::plane_barycentric(x, a, b, c);
+        interpolate(uv1[0], uv1[1], uv1[2], bary)
+    };
+    let scale = (b - a)
+        .length()
+        .max((c - a).length())
+        .max(f32::MIN_POSITIVE);
+    let (u0, u1) = (to_uv1(line.point), to_uv1(line.point + along * scale));
+    let normal = (u1 - u0).perp().try_normalize()?;
+    let sample = interpolate(uv1[0], uv1[1], uv1[2], uv);
+    let (normal, offset) = if normal.dot(sample - u0) >= 0.0 {
+        (normal, -normal.dot(u0))
+    } else {
+        (-normal, normal.dot(u0))
+    };
+    Some([normal.x, normal.y, offset])
 }
 
 impl SurfaceCache for Lightmaps {
@@ -585,119 +981,123 @@ impl SurfaceCache for Lightmaps {
         Method::Lightmap
     }
 
-    /// The only round: every owned texel of every layer, instance by instance, row-major.
+    /// Takes the bake's error bound, sample limits and floor: rounds are then planned
+    /// by the cache (module docs, Rounds).
+    fn plan_sampling(&mut self, estimator: &EstimatorSettings) {
+        self.plan = Some(SamplingPlan::new(estimator, &self.settings));
+    }
+
+    /// Round 0: every owned texel of every layer, instance by instance, row-major; later
+    /// rounds: the texels whose filtered estimate is still above the bound.
     fn next_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>) {
         if self.emitted {
             return;
         }
-        self.emitted = true;
         self.slots.clear();
+        let round = self.rounds;
+        self.rounds += 1;
+        if round > 0 {
+            for &(slot, budget) in &self.pending {
+                let (layer, i) = (
+                    slot as usize / self.layer_texels,
+                    slot as usize % self.layer_texels,
+                );
+                points.push(self.texel_point(scene, layer, i, round, Some(budget)));
+                self.slots.push(slot);
+            }
+            self.pending.clear();
+            if self.slots.is_empty() {
+                self.emitted = true;
+            }
+            return;
+        }
+        // An incremental re-bake (priors) keeps one round of estimates stopped by the
+        // estimator itself: they update filtered values, which are not filtered again.
+        let budget = match self.plan {
+            Some(plan) if self.priors.is_empty() => Some(plan.first),
+            _ => None,
+        };
+        self.probe_crossings(scene);
         for layer in 0..self.layers {
             for m in &self.maps {
-                for k in 0..m.texels() {
-                    let i = m.offset + k;
-                    let triangle = self.owner[i];
-                    if triangle == NONE {
+                for i in m.offset..m.offset + m.texels() {
+                    if self.owner[i] == NONE {
                         continue;
                     }
-                    let (x, y) = (k as u32 % m.width, k as u32 / m.width);
-                    points.push(SamplePoint {
-                        site: SampleSite::Surface {
-                            triangle,
-                            uv: self.sample_uv[i],
-                            front: layer == 0,
-                        },
-                        key: texel_key(scene.triangle_key(triangle), layer, x, y),
-                        prior: self
-                            .priors
-                            .get(layer * self.layer_texels + i)
-                            .copied()
-                            .flatten(),
-                    });
+                    points.push(self.texel_point(scene, layer, i, 0, budget));
                     self.slots.push((layer * self.layer_texels + i) as u32);
                 }
             }
         }
     }
 
-    /// Stores the estimates, refills buried texels, dilates into the gutters and packs
-    /// everything to RGB9E5.
+    /// Merges the round's estimates into their texels, marks buried ones (first round),
+    /// filters, and asks for another round where the filtered error is above the bound;
+    /// after the last round refills buried texels, dilates into the gutters and packs.
     fn finish_round(
         &mut self,
-        _scene: &TracedScene,
+        scene: &TracedScene,
         points: &[SamplePoint],
         estimates: &[Estimate],
     ) {
         debug_assert_eq!(points.len(), self.slots.len());
         let total = self.layers * self.layer_texels;
-        let mut values = vec![Vec3::ZERO; total];
-        self.sample_counts = vec![0; total];
-        let mut state = vec![EMPTY; total];
-        let mut stats = CacheStats::default();
-        let mut rel_error = 0.0f64;
+        if self.merged.len() != total {
+            self.merged = vec![TexelEstimate::default(); total];
+            self.state = vec![EMPTY; total];
+            self.guide = self.texel_guides(scene);
+        }
+        let mut moved = Vec::new();
         for (&slot, e) in self.slots.iter().zip(estimates) {
             let slot = slot as usize;
-            values[slot] = e.value;
-            self.sample_counts[slot] = e.samples;
-            state[slot] = if e.back_face_share > self.settings.buried_threshold {
-                stats.buried += 1;
-                BURIED
-            } else {
-                VALID
-            };
-            stats.samples += e.samples as u64;
-            stats.max_samples_per_point = stats.max_samples_per_point.max(e.samples);
-            rel_error += e.rel_error as f64;
-        }
-        self.buried_slots = state.iter().map(|&st| st == BURIED).collect();
-        stats.sample_points = estimates.len() as u64;
-        stats.mean_rel_error = rel_error / estimates.len().max(1) as f64;
-        // Chart of each texel of a layer (for the same-chart preference of the fill).
-        let texel_chart: Vec<u32> = self
-            .owner
-            .iter()
-            .map(|&t| {
-                if t == NONE {
-                    NONE
-                } else {
-                    self.chart[t as usize]
-                }
-            })
-            .collect();
-        for layer in 0..self.layers {
-            for m in &self.maps {
-                let range = layer * self.layer_texels + m.offset
-                    ..layer * self.layer_texels + m.offset + m.texels();
-                let (w, h) = (m.width as usize, m.height as usize);
-                let chart = &texel_chart[m.offset..m.offset + m.texels()];
-                fill_buried(
-                    &mut values[range.clone()],
-                    &mut state[range.clone()],
-                    chart,
-                    w,
-                    h,
-                );
-                stats.dilated_texels += dilate(
-                    &mut values[range.clone()],
-                    &mut state[range],
-                    w,
-                    h,
-                    self.settings.gutter,
-                );
+            self.merged[slot].merge(e);
+            if matches!(self.state[slot], EMPTY | MOVED) {
+                let buried = e.back_face_share > self.settings.buried_threshold;
+                let exit = self.exits.get(slot).copied().flatten();
+                self.state[slot] = match (buried, exit, self.state[slot]) {
+                    (false, _, _) => VALID,
+                    // Inside a solid, with a visible part of the footprint beyond the
+                    // crossing: estimate there instead.
+                    (true, Some(uv), EMPTY) if self.plan.is_some() && self.priors.is_empty() => {
+                        self.site_uv[slot] = uv;
+                        self.merged[slot] = TexelEstimate::default();
+                        moved.push(slot as u32);
+                        MOVED
+                    }
+                    _ => BURIED,
+                };
             }
         }
-        let max = values
-            .iter()
-            .map(|v| v.max_element())
-            .fold(0.0f32, f32::max);
-        self.scale = Rgb9e5Scale::for_max(max);
-        self.packed = values.iter().map(|&v| self.scale.pack(v)).collect();
-        // UV1: three f32 pairs per triangle corner (a generated layout needs a vertex per
-        // corner); the per-triangle instance index is the engine's mesh binding.
-        stats.cache_bytes = 4 * total as u64 + 24 * self.uv1.len() as u64;
-        self.stats = stats;
-        self.slots = Vec::new();
-        self.priors = Vec::new();
+        if !moved.is_empty() {
+            self.guide = self.texel_guides(scene);
+        }
+        let plan = self.plan.filter(|_| self.priors.is_empty());
+        let filtered = self.filtered(plan.as_ref());
+        self.pending.clear();
+        if let Some(plan) = plan {
+            self.pending
+                .extend(moved.iter().map(|&slot| (slot, plan.first)));
+        }
+        if let Some(plan) = plan.filter(|p| p.bound > 0.0) {
+            for (slot, (e, (v, s))) in self.merged.iter().zip(&filtered).enumerate() {
+                if self.state[slot] == VALID
+                    && e.samples > 0
+                    && e.samples < plan.max
+                    && plan.relative_error(*v, *s) > plan.bound
+                {
+                    self.pending
+                        .push((slot as u32, e.samples.min(plan.max - e.samples)));
+                }
+            }
+        }
+        if self.pending.is_empty() {
+            self.emitted = true;
+            self.finish(
+                filtered.into_iter().map(|(v, _)| v).collect(),
+                plan.as_ref(),
+            );
+        }
+        self.slots.clear();
     }
 
     /// Bilinear sample of the side's texture at the triangle's interpolated UV1. A back
@@ -712,12 +1112,23 @@ impl SurfaceCache for Lightmaps {
         let instance = self.triangle_instance[t] as usize;
         let m = &self.maps[instance];
         let [a, b, c] = self.uv1[t];
+        let at = interpolate(a, b, c, uv);
+        let base = layer * self.layer_texels + m.offset;
+        let crossings = &self.crossing_slot;
+        let lines = &self.crossing_lines;
         bilinear_packed(
             self.texture_slice(layer, instance),
             m.width,
             m.height,
-            interpolate(a, b, c, uv),
+            at,
             self.scale,
+            |k| match crossings.get(base + k).copied() {
+                Some(c) if c != NONE => {
+                    let [la, lb, lc] = lines[c as usize];
+                    la * at.x + lb * at.y + lc >= 0.0
+                }
+                _ => true,
+            },
         )
     }
 

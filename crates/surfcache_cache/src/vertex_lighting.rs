@@ -14,9 +14,9 @@
 //! **Keys.** A vertex's random stream is keyed by its instance's stable key, its mesh
 //! vertex index and the side, so every triangle sharing the vertex reads one estimate.
 //!
-//! **Storage.** RGB9E5 (4 bytes) per (vertex, side) — two slots per vertex, the back one
+//! **Storage.** Three half floats (6 bytes, [`crate::stored_rgb`]) per (vertex, side) — two slots per vertex, the back one
 //! zero where the back side is not baked — plus a `u32` vertex index per triangle corner:
-//! `cache_bytes = 4·2·vertices + 12·triangles + 4` (the last 4: the scale). Buried
+//! `cache_bytes = 6·2·vertices + 12·triangles + 4` (the last 4: the scale). Buried
 //! estimates (`back_face_share > 0.5`) are counted in [`CacheStats::buried`] but kept: the
 //! baseline is shown as it is.
 //!
@@ -26,7 +26,10 @@
 
 use crate::{
     CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
-    UNMAPPED, irradiance_map::EstimateTotals, mesh_colour, rgb9e5::Rgb9e5Scale,
+    UNMAPPED,
+    irradiance_map::EstimateTotals,
+    mesh_colour,
+    stored_rgb::{STORED_RGB_BYTES, StoreScale, StoredRgb},
 };
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
@@ -65,12 +68,12 @@ pub struct VertexLighting {
     /// Unique vertex of each traced triangle corner. Vertices are numbered in order of
     /// first appearance (triangle by triangle, corner by corner).
     corners: Vec<[u32; 3]>,
-    /// RGB9E5 irradiance per vertex slot `2·vertex + side` (side 0 = front).
-    packed: Vec<u32>,
+    /// Stored irradiance per vertex slot `2·vertex + side` (side 0 = front).
+    packed: Vec<StoredRgb>,
     /// Hemisphere samples per vertex slot (diagnostics only).
     #[serde(default)]
     sample_counts: Vec<u32>,
-    scale: Rgb9e5Scale,
+    scale: StoreScale,
     totals: EstimateTotals,
     buried: u64,
     /// Whether the one round was asked for.
@@ -113,9 +116,9 @@ impl VertexLighting {
         Self {
             settings,
             corners,
-            packed: vec![0; 2 * next as usize],
+            packed: vec![[0; 3]; 2 * next as usize],
             sample_counts: vec![0; 2 * next as usize],
-            scale: Rgb9e5Scale::default(),
+            scale: StoreScale::default(),
             totals: EstimateTotals::default(),
             buried: 0,
             requested: false,
@@ -177,6 +180,7 @@ impl SurfaceCache for VertexLighting {
                                 .get(2 * id as usize + (!front) as usize)
                                 .copied()
                                 .flatten(),
+                            budget: None,
                         });
                     }
                 }
@@ -209,7 +213,7 @@ impl SurfaceCache for VertexLighting {
         }
         self.priors = Vec::new();
         let max = values.iter().fold(0.0f32, |m, v| m.max(v.max_element()));
-        self.scale = Rgb9e5Scale::for_max(max);
+        self.scale = StoreScale::for_max(max);
         for (p, v) in self.packed.iter_mut().zip(&values) {
             *p = self.scale.pack(*v);
         }
@@ -261,7 +265,9 @@ impl SurfaceCache for VertexLighting {
 
     fn stats(&self) -> CacheStats {
         CacheStats {
-            cache_bytes: 4 * self.packed.len() as u64 + 12 * self.corners.len() as u64 + 4,
+            cache_bytes: STORED_RGB_BYTES * self.packed.len() as u64
+                + 12 * self.corners.len() as u64
+                + 4,
             buried: self.buried,
             ..self.totals.stats()
         }

@@ -12,7 +12,7 @@ use surfcache_cache::{
         IrradianceMapSettings, IrradianceMaps, coarse_neighbours, grid_index, grid_interpolate,
         grid_size, sample_key,
     },
-    rgb9e5::Rgb9e5Scale,
+    stored_rgb::StoreScale,
     vertex_lighting::{VertexLighting, VertexLightingSettings},
 };
 use surfcache_core::{
@@ -199,7 +199,7 @@ fn triangles_within_one_sample_spacing_keep_order_one_grids() {
 fn refinement_keeps_every_sample_and_asks_only_for_new_ones() {
     let traced = TracedScene::new(&unit_floor()).unwrap();
     // A ramp that is steep around x = 0.4 (refines up to the cap) and whose maximum
-    // (at x = 1) is already sampled in round 0, so the RGB9E5 scale never changes.
+    // (at x = 1) is already sampled in round 0, so the store's scale never changes.
     let f = |x: f32| Vec3::new(1.0 + 4.0 / (1.0 + (-(x - 0.4) * 40.0).exp()), 2.0, 0.5);
     let settings = IrradianceMapSettings {
         density: 1000.0,
@@ -289,11 +289,11 @@ fn refinement_keeps_every_sample_and_asks_only_for_new_ones() {
     assert_eq!(stats.sample_points as usize, held - 2);
     assert_eq!(
         stats.cache_bytes,
-        4 * held as u64 + 5 * 4 + 4,
-        "4 bytes per sample, 5 per grid slot (2 triangles × 2 sides), 4 for the scale"
+        6 * held as u64 + 5 * 4 + 4,
+        "6 bytes per sample, 5 per grid slot (2 triangles × 2 sides), 4 for the scale"
     );
-    // Lookups at every sample return its estimate (up to RGB9E5 rounding).
-    let scale = Rgb9e5Scale::for_max(5.0);
+    // Lookups at every sample return its estimate (up to half-float rounding).
+    let scale = StoreScale::for_max(5.0);
     for t in 0..2u32 {
         let n = maps.order(t, true);
         let [a, b, c] = traced.positions[t as usize];

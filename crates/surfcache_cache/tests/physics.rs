@@ -3,8 +3,8 @@
 //!
 //! Tolerances: an estimate stops once its relative standard error C ≤ `max_rel_error`
 //! in every channel, and a lookup is a convex combination of estimates, so a lookup lies
-//! within 4·`max_rel_error`·E of the truth (four standard errors) plus the RGB9E5
-//! rounding of 1/512 of the largest channel.
+//! within 4·`max_rel_error`·E of the truth (four standard errors) plus the half-float
+//! rounding of 2⁻¹¹ of each channel.
 
 mod common;
 
@@ -22,10 +22,10 @@ use surfcache_core::{
 };
 use surfcache_trace::{Sampler, TracedScene};
 
-/// |got − expected| ≤ 4·rel·expected + max(expected)/256 in every channel.
+/// |got − expected| ≤ 4·rel·expected + expected/1024 in every channel.
 fn assert_near(got: Vec3, expected: Vec3, rel: f32, what: &str) {
     for c in 0..3 {
-        let tol = 4.0 * rel * expected[c] + expected.max_element() / 256.0 + 1e-6;
+        let tol = 4.0 * rel * expected[c] + expected[c] / 1024.0 + 1e-6;
         assert!(
             (got[c] - expected[c]).abs() <= tol,
             "{what}: channel {c}: got {got}, expected {expected}"

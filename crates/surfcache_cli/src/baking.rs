@@ -41,6 +41,8 @@ pub struct BakeOptions {
     pub max_rel_error: f32,
     pub min_samples: Option<u32>,
     pub max_samples: Option<u32>,
+    /// A fixed sample budget per estimate instead of the error bound.
+    pub samples: Option<u32>,
     pub bounces: Option<u32>,
     pub seed: u64,
     /// Irradiance-map samples or lightmap texels per metre (the method's own if `None`).
@@ -59,15 +61,24 @@ impl BakeOptions {
             bail!("--max-rel-error must be a positive number");
         }
         let defaults = EstimatorSettings::default();
-        let min_samples = self.min_samples.unwrap_or(defaults.min_samples);
+        if let Some(n) = self.samples {
+            if n == 0 || self.min_samples.is_some() || self.max_samples.is_some() {
+                bail!("--samples takes a positive count and replaces --min-samples/--max-samples");
+            }
+        }
+        let min_samples = self
+            .samples
+            .or(self.min_samples)
+            .unwrap_or(defaults.min_samples);
         let max_samples = self
-            .max_samples
+            .samples
+            .or(self.max_samples)
             .unwrap_or(defaults.max_samples.max(min_samples));
         if min_samples == 0 || max_samples < min_samples {
             bail!("need 1 ≤ --min-samples ≤ --max-samples (got {min_samples} and {max_samples})");
         }
-        if self.gather > 4 {
-            bail!("--gather takes at most 4 pre-passes");
+        if self.gather > 64 {
+            bail!("--gather takes at most 64 bounce passes");
         }
         let mut cache = CacheSettings::for_method(self.method);
         cache.set_both_sides(self.both_sides);
@@ -88,7 +99,11 @@ impl BakeOptions {
             cache,
             estimator: EstimatorSettings {
                 sampler: self.sampler,
-                max_rel_error: self.max_rel_error,
+                max_rel_error: if self.samples.is_some() {
+                    0.0
+                } else {
+                    self.max_rel_error
+                },
                 min_samples,
                 max_samples,
                 floor: 0.0,
@@ -96,6 +111,10 @@ impl BakeOptions {
             },
             seed: self.seed,
             gather_passes: self.gather,
+            density_budget: match self.density {
+                Some(_) => None,
+                None => Some(surfcache_cache::bake::DEFAULT_DENSITY_BUDGET),
+            },
         })
     }
 }

@@ -30,6 +30,20 @@ where
     xa * (1.0 - uv.x - uv.y) + xb * uv.x + xc * uv.y
 }
 
+/// Barycentrics (u,v) of the projection of `p` onto the plane of triangle (A,B,C), not
+/// clamped to the triangle (Ericson, *Real-Time Collision Detection*, §3.4, by dot
+/// products of the edge vectors).
+pub fn plane_barycentric(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec2 {
+    let (e0, e1, d) = (b - a, c - a, p - a);
+    let (d00, d01, d11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+    let (d20, d21) = (d.dot(e0), d.dot(e1));
+    let denom = d00 * d11 - d01 * d01;
+    if denom == 0.0 {
+        return Vec2::ZERO;
+    }
+    Vec2::new(d11 * d20 - d01 * d21, d00 * d21 - d01 * d20) / denom
+}
+
 /// Closest point of triangle (A,B,C) to `p`, returned as barycentrics (u,v)
 /// (Ericson, *Real-Time Collision Detection*, §5.1.5, Voronoi regions of the triangle).
 pub fn closest_point_barycentric(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec2 {

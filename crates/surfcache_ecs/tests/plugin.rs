@@ -34,6 +34,7 @@ fn settings(method: Method) -> BakeSettings {
         },
         seed: 7,
         gather_passes: 0,
+        density_budget: None,
     }
 }
 

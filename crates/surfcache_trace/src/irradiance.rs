@@ -303,7 +303,10 @@ pub fn hemisphere_sample(
 /// ε > 0, which sets the scale), except where most first rays hit the back of a
 /// single-sided surface: such a point lies inside geometry (a buried sample, which the
 /// caches discard at their default `buried_threshold` of 0.5), and keeps stopping at
-/// `min_samples`.
+/// `min_samples`; and except for direct light alone (`max_bounces = Some(0)`) and with
+/// `gather`, where every sample meets the lights or the gathered cache: an all-zero run
+/// then means that nothing the point sees is lit (a light-tight interior, a sealed void),
+/// and stops at `min_samples` too.
 ///
 /// With `gather`, paths end at their first hit with the lookup's irradiance there (final
 /// gathering, see [`IrradianceLookup`]); without, they are traced to the end.
@@ -331,7 +334,13 @@ pub fn estimate(
         punctual,
         settings.max_rel_error,
         settings.min_samples,
-        settings.floor as f64 / FLOOR_FRACTION as f64,
+        // Direct light alone, or one bounce gathered from a cache: every sample meets
+        // the cache or the lights, so an all-zero run is a dark point, not missed light.
+        if gather.is_some() || settings.max_bounces == Some(0) {
+            0.0
+        } else {
+            settings.floor as f64 / FLOOR_FRACTION as f64
+        },
         |root, rng| {
             let (x, path) = hemisphere_sample(&at, settings, root, rng, None);
             (x, path.first_hit, path.rays)

@@ -43,6 +43,11 @@ pub struct BakeArgs {
     /// Most hemisphere samples per estimate [default: 65536].
     #[arg(long)]
     max_samples: Option<u32>,
+    /// Sample budget: exactly N hemisphere samples per estimate (per texel, per sample
+    /// point), as engine bakers count them, instead of the error bound; lightmaps still
+    /// share samples between neighbours. Replaces --min-samples and --max-samples.
+    #[arg(long)]
+    samples: Option<u32>,
     /// Maximum number of indirect bounces [default: unlimited, Russian roulette].
     #[arg(long)]
     bounces: Option<u32>,
@@ -62,8 +67,10 @@ pub struct BakeArgs {
     /// interpolation by at most this relative error [default: the method's own].
     #[arg(long)]
     interpolation_error: Option<f32>,
-    /// Gathering pre-passes: coarse irradiance maps whose irradiance ends the next pass's
-    /// paths at their first hit (final gathering). 0 traces every path to its end.
+    /// Most bounce passes before the final one: pass 0 bakes direct light, each later
+    /// pass ends its paths at their first hit with the irradiance of the pass before
+    /// (final gathering); they stop once the bounce series has converged. 0 traces every
+    /// path to its end (Russian roulette).
     #[arg(long, default_value_t = DEFAULT_GATHER_PASSES)]
     gather: u32,
     /// Which sides of the surfaces to bake: both, or front (counter-clockwise) only.
@@ -95,6 +102,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         max_rel_error: args.max_rel_error,
         min_samples: args.min_samples,
         max_samples: args.max_samples,
+        samples: args.samples,
         bounces: args.bounces,
         seed: args.seed,
         density: args.density,
@@ -172,6 +180,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
             "max_rel_error": args.max_rel_error,
             "min_samples": min_samples,
             "max_samples": max_samples,
+            "samples": args.samples,
             "bounces": args.bounces,
             "seed": args.seed,
             "threads": threads.unwrap_or_else(rayon::current_num_threads),

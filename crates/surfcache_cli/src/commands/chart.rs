@@ -448,6 +448,7 @@ pub fn run(args: ChartArgs) -> Result<()> {
                         max_rel_error: bound,
                         min_samples: spec.min_samples,
                         max_samples: spec.max_samples,
+                        samples: None,
                         bounces: None,
                         seed: args.seed,
                         density: match method {

@@ -28,6 +28,11 @@ pub struct Comparison {
     /// sqrt(mean over points and channels of ((E − R)/(R + ε))²), ε = 1 % of the
     /// channel's mean reference value.
     pub rel_rms: f64,
+    /// Median and 90th percentile over points of the per-point relative error
+    /// e = sqrt(mean over channels of ((E − R)/(R + ε))²), the same ε: `rel_rms` is the
+    /// RMS of e, so a few leaking points show in it and in `max_rel`, noise in the median.
+    pub median_rel: f64,
+    pub p90_rel: f64,
     /// sqrt(Σ|E − R|² / Σ|R|²).
     pub nrmse: f64,
     /// Largest per-point relative error (with the same ε).
@@ -74,9 +79,11 @@ pub fn compare(
     let eps = mean * 0.01;
     let (mut sq, mut num, mut den, mut std_sq, mut std_n) = (0.0, 0.0, 0.0, 0.0, 0usize);
     let mut noise_sq = 0.0;
+    let mut per_point = Vec::with_capacity(n);
     for (e, r, s) in &pairs {
         let d = (*e - *r) / (r.max(glam::DVec3::ZERO) + eps).max(glam::DVec3::splat(1e-300));
         sq += d.length_squared();
+        per_point.push((d.length_squared() / 3.0).sqrt());
         out.max_rel = out.max_rel.max(d.abs().max_element());
         num += (*e - *r).length_squared();
         den += r.length_squared();
@@ -89,10 +96,24 @@ pub fn compare(
         }
     }
     out.rel_rms = (sq / (3 * n) as f64).sqrt();
+    per_point.sort_by(f64::total_cmp);
+    out.median_rel = quantile(&per_point, 0.5);
+    out.p90_rel = quantile(&per_point, 0.9);
     out.nrmse = if den > 0.0 { (num / den).sqrt() } else { 0.0 };
     out.reference_rel_std = (std_n > 0).then(|| (std_sq / std_n as f64).sqrt());
     out.reference_noise = (std_n > 0).then(|| (noise_sq / (3 * std_n) as f64).sqrt());
     out
+}
+
+/// The `q`-quantile of sorted `values`, linearly interpolated between order statistics
+/// (Hyndman & Fan 1996, definition 7, the default of R and NumPy).
+pub fn quantile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let h = (sorted.len() - 1) as f64 * q.clamp(0.0, 1.0);
+    let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
+    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
 }
 
 pub fn run(args: CompareArgs) -> Result<()> {

@@ -19,6 +19,13 @@ pub struct PointsArgs {
     /// random.
     #[arg(long, default_value = "front")]
     side: String,
+    /// Sample points a player can see instead: first hits of rays in uniformly random
+    /// directions from random viewpoints in the open air of the scene (points of its
+    /// bounding box from which none of 64 random rays meets the back of a single-sided
+    /// surface first and at least one escapes to the sky), each on the side facing its
+    /// viewpoint. `--side` is then ignored.
+    #[arg(long)]
+    visible: bool,
     /// Output CSV x,y,z,nx,ny,nz [default: stdout].
     #[arg(short = 'o', long = "out")]
     output: Option<PathBuf>,
@@ -27,6 +34,13 @@ pub struct PointsArgs {
 pub fn run(args: PointsArgs) -> Result<()> {
     let loaded = LoadedWorld::load(&args.scene, &EnvArgs::default())?;
     let scene = loaded.traced()?;
+    if args.visible {
+        let rows: Vec<String> = visible_points(&scene, args.count, args.seed)?
+            .into_iter()
+            .map(|(x, n)| format!("{},{},{},{},{},{}", x.x, x.y, x.z, n.x, n.y, n.z))
+            .collect();
+        return crate::points::write_results(args.output.as_deref(), "x,y,z,nx,ny,nz", &rows);
+    }
     let areas = scene.area_distribution();
     let mut rng = Rng::new(args.seed, 0x9017_5000);
     let mut rows = Vec::with_capacity(args.count);
@@ -44,4 +58,64 @@ pub fn run(args: PointsArgs) -> Result<()> {
         rows.push(format!("{},{},{},{},{},{}", x.x, x.y, x.z, n.x, n.y, n.z));
     }
     crate::points::write_results(args.output.as_deref(), "x,y,z,nx,ny,nz", &rows)
+}
+
+/// Rays a candidate viewpoint sends to tell open air from the inside of a solid.
+const VIEWPOINT_PROBES: u32 = 64;
+
+/// `count` points a player can see, with the geometric normal of the side facing the
+/// viewer ([`PointsArgs::visible`]); deterministic for a seed.
+fn visible_points(
+    scene: &surfcache_trace::TracedScene,
+    count: usize,
+    seed: u64,
+) -> Result<Vec<(glam::Vec3, glam::Vec3)>> {
+    use glam::Vec3;
+    use surfcache_core::sampling::uniform_sphere;
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for t in &scene.positions {
+        for p in t {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+    }
+    if scene.triangle_count() == 0 {
+        bail!("the scene has no triangles to sample points on");
+    }
+    let mut rng = Rng::new(seed, 0x7615_1b1e);
+    let mut out = Vec::with_capacity(count);
+    let mut tries = 0u64;
+    while out.len() < count {
+        tries += 1;
+        if tries > 1000 * count as u64 + 100_000 {
+            bail!("found no open air to look from in the scene (is it closed everywhere?)");
+        }
+        let eye = lo + (hi - lo) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+        let (mut inside, mut sky) = (false, false);
+        for _ in 0..VIEWPOINT_PROBES {
+            let d = uniform_sphere(rng.next_vec2());
+            match scene.closest_hit(eye, d, f32::INFINITY) {
+                None => sky = true,
+                Some(h) => {
+                    let front = scene.geometric_normals[h.triangle as usize].dot(d) < 0.0;
+                    if !front && !scene.material_of(h.triangle).double_sided {
+                        inside = true;
+                        break;
+                    }
+                }
+            }
+        }
+        if inside || !sky {
+            continue;
+        }
+        let d = uniform_sphere(rng.next_vec2());
+        let Some(h) = scene.closest_hit(eye, d, f32::INFINITY) else {
+            continue;
+        };
+        let mu = scene.geometric_normals[h.triangle as usize];
+        let n = if mu.dot(d) < 0.0 { mu } else { -mu };
+        let p = scene.surface_point(h.triangle, h.uv, mu.dot(d) < 0.0);
+        out.push((p.position, n));
+    }
+    Ok(out)
 }

@@ -1,0 +1,138 @@
+//! Helpers shared by the root test binaries: scenes, complete bakes as the product runs
+//! them, lookups at world points, and closed forms.
+#![allow(dead_code)]
+
+use std::f32::consts::PI;
+use std::sync::Arc;
+use surfcache::cache::{
+    Cache, CacheSettings, SurfaceCache,
+    bake::{BakeJob, BakeSettings},
+};
+use surfcache::core::{
+    Environment, Instance, Material, Mesh, Scene,
+    glam::{Affine3A, Vec2, Vec3},
+};
+use surfcache::trace::{EstimatorSettings, Sampler, TracedScene};
+
+/// A grey Lambertian material.
+pub fn grey(albedo: f32) -> Material {
+    Material::diffuse("grey", Vec3::splat(albedo))
+}
+
+/// An instance of `mesh` with `material` at the identity transform.
+pub fn instance(mesh: Mesh, material: Material) -> Instance {
+    Instance {
+        name: mesh.name.clone(),
+        mesh: Arc::new(mesh),
+        material: Arc::new(material),
+        transform: Affine3A::IDENTITY,
+    }
+}
+
+/// A traced scene of `instances` under `environment`.
+pub fn traced(instances: Vec<Instance>, environment: Environment) -> TracedScene {
+    TracedScene::new(&Scene {
+        name: "test".into(),
+        instances,
+        environment,
+        ..Default::default()
+    })
+    .expect("a valid scene")
+}
+
+/// Adaptive `best` estimates with bound `max_rel_error` (the job fills in the floor).
+pub fn estimator(max_rel_error: f32) -> EstimatorSettings {
+    EstimatorSettings {
+        sampler: Sampler::Best,
+        max_rel_error,
+        floor: 0.0,
+        ..Default::default()
+    }
+}
+
+/// A complete bake as `surfcache bake` runs it (bounce passes, the default density
+/// budget) of `cache` with `estimator`. Returns the final cache and the floor ε.
+pub fn bake(
+    scene: &TracedScene,
+    cache: CacheSettings,
+    estimator: EstimatorSettings,
+) -> (Arc<Cache>, f32) {
+    let mut job = BakeJob::new(BakeSettings {
+        cache,
+        estimator,
+        ..Default::default()
+    });
+    while !job.step(scene, 4096) {}
+    let floor = job.floor().expect("the job measured the scene");
+    let outcome = job.into_outcome().expect("the bake finished");
+    (outcome.cache().clone(), floor)
+}
+
+/// The surface a world point with normal `n` lies on: (triangle, barycentrics, front).
+pub fn locate(scene: &TracedScene, x: Vec3, n: Vec3) -> (u32, Vec2, bool) {
+    let p = scene
+        .locate(x, n)
+        .unwrap_or_else(|| panic!("{x} is on no surface"));
+    let front = p
+        .geometric_normal
+        .dot(scene.geometric_normals[p.triangle as usize])
+        > 0.0;
+    (p.triangle, p.uv, front)
+}
+
+/// A cache's irradiance at world point `x` on the side `n` looks at.
+pub fn lookup(cache: &dyn SurfaceCache, scene: &TracedScene, x: Vec3, n: Vec3) -> Vec3 {
+    let (t, uv, front) = locate(scene, x, n);
+    cache.lookup(t, uv, front)
+}
+
+/// Irradiance at `x` (normal `n`) from a planar polygon of uniform radiance `radiance`
+/// lying wholly on the side of `x`'s tangent plane that `n` points to: Lambert's formula
+/// (Arvo 1995, "Applications of Irradiance Tensors", eq. 1),
+/// `E = L/2 · |Σ_i Θ_i ⟨n, γ̂_i⟩|`, `Θ_i` the angle the edge v_i v_{i+1} subtends at `x`
+/// and `γ̂_i` the unit normal of the plane through `x` and that edge.
+pub fn polygon_irradiance(x: Vec3, n: Vec3, polygon: &[Vec3], radiance: f32) -> f32 {
+    let mut sum = 0.0f64;
+    for i in 0..polygon.len() {
+        let a = (polygon[i] - x).normalize().as_dvec3();
+        let b = (polygon[(i + 1) % polygon.len()] - x)
+            .normalize()
+            .as_dvec3();
+        let theta = a.dot(b).clamp(-1.0, 1.0).acos();
+        let Some(gamma) = a.cross(b).try_normalize() else {
+            continue;
+        };
+        sum += theta * n.as_dvec3().dot(gamma);
+    }
+    (0.5 * radiance as f64 * sum.abs()) as f32
+}
+
+/// The part of polygon `p` on the side `n · (y − x) ≥ 0` of the plane through `x`
+/// (Sutherland–Hodgman clipping against one plane).
+pub fn clip_polygon(p: &[Vec3], x: Vec3, n: Vec3) -> Vec<Vec3> {
+    let mut out = Vec::with_capacity(p.len() + 1);
+    for i in 0..p.len() {
+        let (a, b) = (p[i], p[(i + 1) % p.len()]);
+        let (da, db) = (n.dot(a - x), n.dot(b - x));
+        if da >= 0.0 {
+            out.push(a);
+        }
+        if (da >= 0.0) != (db >= 0.0) {
+            out.push(a + (b - a) * (da / (da - db)));
+        }
+    }
+    out
+}
+
+/// Under a uniform sky of radiance `radiance` with black, opaque `blockers` (planar
+/// polygons, mutually non-overlapping as seen from `x`): E = πL − Σ polygon irradiance of
+/// each blocker's part above `x`'s tangent plane.
+pub fn sky_minus_blockers(x: Vec3, n: Vec3, blockers: &[Vec<Vec3>], radiance: f32) -> f32 {
+    let blocked: f32 = blockers
+        .iter()
+        .map(|p| clip_polygon(p, x, n))
+        .filter(|p| p.len() >= 3)
+        .map(|p| polygon_irradiance(x, n, &p, radiance))
+        .sum();
+    PI * radiance - blocked
+}
