@@ -33,7 +33,11 @@ fn irradiance(map: &EnvironmentMap, n: Vec3) -> Vec3 {
         let theta = (j as f32 + 0.5) * dt;
         for i in 0..cols {
             let phi = (i as f32 + 0.5) * dp;
-            let d = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+            let d = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            );
             let c = n.dot(d);
             if c > 0.0 {
                 e += (map.radiance(d) * c * theta.sin() * dt * dp).as_dvec3();
@@ -57,7 +61,10 @@ fn a_channel_of_a_few_percent_holds_its_own_bound() {
         Environment::from_map(Arc::new(map.clone())),
     );
     let want = irradiance(&map, n);
-    assert!(want.x < 0.06 * want.y, "red is a few percent of green: {want}");
+    assert!(
+        want.x < 0.06 * want.y,
+        "red is a few percent of green: {want}"
+    );
     let rel = 0.01;
     for method in [Method::IrradianceMap, Method::Lightmap] {
         let settings = match method {
