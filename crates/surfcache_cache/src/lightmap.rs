@@ -3,7 +3,8 @@
 //!
 //! - **Layout.** An instance whose mesh has a usable TEXCOORD_1 keeps it; its square
 //!   texture has the side √(world area / UV1 area) × density. Otherwise
-//!   [`charts::generate_atlas`] makes one from coplanar charts.
+//!   [`charts::generate_atlas`] makes one (charts grown over smooth edges, flattened and
+//!   packed by footprint).
 //! - **Rasterisation.** Every triangle covers every texel its UV1 footprint overlaps
 //!   (conservative rasterisation, [`conservative_texels`]). A texel belongs to one
 //!   triangle: the one containing its centre, else the nearest; it is estimated at the
@@ -47,9 +48,11 @@ pub struct LightmapSettings {
     /// TEXCOORD_1 textures are clamped. Default 2048.
     pub max_size: u32,
     /// Free texels around every generated chart, filled by dilation (`gutter` passes).
-    /// Default 2: bilinear filtering inside a chart's box never reads beyond it, but
-    /// points near a slanted chart edge read unowned texels one ring out, and a second
-    /// ring keeps mipmap level 1 clean. TEXCOORD_1 layouts bring their own gutters.
+    /// Default 1: bilinear filtering at a point of a triangle reads the texel holding it
+    /// and its 8 neighbours at most, so one ring of the chart's own keeps every read in
+    /// the chart (points near a slanted chart edge read unowned texels of that ring).
+    /// The textures are sampled without mipmaps; a second ring would keep mipmap level
+    /// 1 clean. TEXCOORD_1 layouts bring their own gutters.
     pub gutter: u32,
     /// Also bake the back side of every surface (a second layer; published for
     /// double-sided materials). Default true.
@@ -69,7 +72,7 @@ impl Default for LightmapSettings {
         Self {
             texels_per_metre: 64.0,
             max_size: 2048,
-            gutter: 2,
+            gutter: 1,
             both_sides: true,
             buried_threshold: 0.5,
             filter: FilterSettings::default(),
@@ -271,6 +274,20 @@ impl Lightmaps {
     /// mean over the mesh.
     pub fn texels_per_metre(&self, instance: u32) -> f32 {
         self.maps[instance as usize].texels_per_metre
+    }
+
+    /// Texels of one layer that a triangle owns (the estimated ones; the rest are gutter).
+    pub fn owned_texels(&self) -> usize {
+        self.owner.iter().filter(|&&t| t != NONE).count()
+    }
+
+    /// Number of charts over all instances.
+    pub fn chart_count(&self) -> usize {
+        self.chart
+            .iter()
+            .map(|&c| c as usize + 1)
+            .max()
+            .unwrap_or(0)
     }
 
     /// UV1 of the corners of traced triangle `t`, in the traced scene's corner order.
@@ -698,7 +715,19 @@ fn usable_uv1_area(uv1: &[[Vec2; 3]]) -> Option<f32> {
 /// axis test of a triangle and a box (Akenine-Möller 2001: the box axes, then each edge
 /// normal against the box corner farthest along it). A triangle that overlaps no texel
 /// that much still gets the texel holding its centroid. Degenerate triangles get none.
-pub fn conservative_texels(corners: [Vec2; 3], clip: [u32; 4], mut f: impl FnMut(u32, u32)) {
+pub fn conservative_texels(corners: [Vec2; 3], clip: [u32; 4], f: impl FnMut(u32, u32)) {
+    texels_overlapped_by(corners, clip, TEXEL_EPSILON, f);
+}
+
+/// [`conservative_texels`] with overlaps of at most `epsilon` texels counted as none (a
+/// negative `epsilon` also counts texels the triangle comes within `-epsilon` of: a
+/// superset, which the atlas packer reserves).
+pub(crate) fn texels_overlapped_by(
+    corners: [Vec2; 3],
+    clip: [u32; 4],
+    epsilon: f32,
+    mut f: impl FnMut(u32, u32),
+) {
     let [a, b, c] = corners;
     let twice_area = (b - a).perp_dot(c - a);
     if !(twice_area.is_finite() && twice_area != 0.0) || clip[2] == 0 || clip[3] == 0 {
@@ -709,6 +738,8 @@ pub fn conservative_texels(corners: [Vec2; 3], clip: [u32; 4], mut f: impl FnMut
     let edges = [(a, b), (b, c), (c, a)].map(|(p, q)| (p, (q - p).perp() * sign));
     let lo = a.min(b).min(c);
     let hi = a.max(b).max(c);
+    let reach = Vec2::splat((-epsilon).max(0.0));
+    let (lo, hi) = (lo - reach, hi + reach);
     let (cx1, cy1) = (clip[0] + clip[2] - 1, clip[1] + clip[3] - 1);
     let x0 = (lo.x.floor().max(0.0) as u32).clamp(clip[0], cx1);
     let y0 = (lo.y.floor().max(0.0) as u32).clamp(clip[1], cy1);
@@ -717,17 +748,17 @@ pub fn conservative_texels(corners: [Vec2; 3], clip: [u32; 4], mut f: impl FnMut
     let mut any = false;
     for y in y0..=y1 {
         let yf = y as f32;
-        if yf + 1.0 - lo.y <= TEXEL_EPSILON || hi.y - yf <= TEXEL_EPSILON {
+        if yf + 1.0 - lo.y <= epsilon.max(0.0) || hi.y - yf <= epsilon.max(0.0) {
             continue;
         }
         for x in x0..=x1 {
             let xf = x as f32;
-            if xf + 1.0 - lo.x <= TEXEL_EPSILON || hi.x - xf <= TEXEL_EPSILON {
+            if xf + 1.0 - lo.x <= epsilon.max(0.0) || hi.x - xf <= epsilon.max(0.0) {
                 continue;
             }
             let separated = edges.iter().any(|&(p, n)| {
                 let reach = n.dot(Vec2::new(xf, yf) - p) + n.x.max(0.0) + n.y.max(0.0);
-                reach <= TEXEL_EPSILON * n.length()
+                reach <= epsilon * n.length()
             });
             if !separated {
                 any = true;

@@ -7,7 +7,7 @@ use std::{collections::HashMap, f32::consts::PI, sync::Arc};
 use surfcache_cache::{
     SurfaceCache,
     bake::{Baker, bake_to_convergence},
-    charts::coplanar_charts,
+    charts::{coplanar_charts, generate_atlas},
     lightmap::{LightmapSettings, Lightmaps, conservative_texels},
 };
 use surfcache_core::{
@@ -393,6 +393,53 @@ fn odd_triangles() -> Mesh {
     )
 }
 
+/// A UV sphere of radius `r` with shared vertices: curved everywhere, closed, so its
+/// charts are cut where their growth fronts meet and flattened conformally.
+fn sphere(r: f32, rings: u32, segments: u32) -> Mesh {
+    let mut positions = vec![Vec3::new(0.0, r, 0.0)];
+    for i in 1..rings {
+        let theta = i as f32 / rings as f32 * PI;
+        for j in 0..segments {
+            let phi = j as f32 / segments as f32 * 2.0 * PI;
+            positions.push(
+                r * Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.cos(),
+                    theta.sin() * phi.sin(),
+                ),
+            );
+        }
+    }
+    positions.push(Vec3::new(0.0, -r, 0.0));
+    let bottom = positions.len() as u32 - 1;
+    let at = |i: u32, j: u32| 1 + (i - 1) * segments + j % segments;
+    let mut indices = Vec::new();
+    for j in 0..segments {
+        indices.push([0, at(1, j + 1), at(1, j)]);
+        indices.push([bottom, at(rings - 1, j), at(rings - 1, j + 1)]);
+        for i in 1..rings - 1 {
+            indices.push([at(i, j), at(i, j + 1), at(i + 1, j + 1)]);
+            indices.push([at(i, j), at(i + 1, j + 1), at(i + 1, j)]);
+        }
+    }
+    Mesh::new("sphere", positions, indices)
+}
+
+/// A 1 m square heightfield of n × n quads, z = 0.15 sin(6x) cos(5y): smooth, not
+/// developable.
+fn wavy(n: u32) -> Mesh {
+    let mut mesh = grid(n);
+    for p in &mut mesh.positions {
+        p.z = 0.15 * (6.0 * p.x).sin() * (5.0 * p.y).cos();
+    }
+    mesh.name = "wavy".into();
+    mesh
+}
+
+/// The generated atlas' invariants on every test mesh, as `Lightmaps` lays them out:
+/// deterministic, every triangle covers texels inside its chart's box, no texel centre
+/// (at a quarter-texel pitch) lies inside two triangles, two charts' texels are at least
+/// 2 · gutter apart inside the texture, and the texels follow the surface area.
 #[test]
 fn generated_charts_do_not_overlap_and_cover_every_triangle() {
     let meshes = [
@@ -400,8 +447,10 @@ fn generated_charts_do_not_overlap_and_cover_every_triangle() {
         grid(8),
         cylinder(),
         odd_triangles(),
+        sphere(0.4, 12, 24),
+        wavy(24),
     ];
-    // Charts: six faces, one plane, a column per cylinder segment.
+    // Coplanar charts: six faces, one plane, a column per cylinder segment.
     for (mesh, expected) in meshes.iter().zip([Some(6), Some(1), Some(24), None]) {
         let tris: Vec<[Vec3; 3]> = (0..mesh.indices.len()).map(|t| mesh.triangle(t)).collect();
         let normals: Vec<Vec3> = tris
@@ -421,16 +470,13 @@ fn generated_charts_do_not_overlap_and_cover_every_triangle() {
             .collect(),
         Vec3::ONE,
     );
-    for gutter in [1, 2] {
-        let density = 32.0;
-        let cache = Lightmaps::new(
-            &traced,
-            LightmapSettings {
-                texels_per_metre: density,
-                gutter,
-                ..Default::default()
-            },
-        );
+    for (gutter, density) in [(1, 32.0), (2, 32.0), (1, 5.0)] {
+        let settings = LightmapSettings {
+            texels_per_metre: density,
+            gutter,
+            ..Default::default()
+        };
+        let cache = Lightmaps::new(&traced, settings);
         assert_eq!(cache.texels_per_metre(1), density);
         for inst in 0..traced.instance_triangles.len() {
             let [w, h] = cache.texture_size(inst as u32);
@@ -444,17 +490,39 @@ fn generated_charts_do_not_overlap_and_cover_every_triangle() {
                 .clone()
                 .map(|t| traced.geometric_normals[t as usize])
                 .collect();
-            let charts = coplanar_charts(&tris, &normals);
+            // The layout `Lightmaps` made, made again: the same.
+            let atlas = generate_atlas(&tris, &normals, density, gutter, settings.max_size);
+            assert_eq!(
+                atlas,
+                generate_atlas(&tris, &normals, density, gutter, settings.max_size)
+            );
+            assert_eq!([atlas.width, atlas.height], [w, h]);
+            for (k, t) in range.clone().enumerate() {
+                assert_eq!(atlas.uv1[k], cache.triangle_uv1(t), "triangle {t}");
+            }
             let size = Vec2::new(w as f32, h as f32);
             // Chart of every texel a footprint (grown by the gutter) reaches.
             let mut claimed: HashMap<(i64, i64), u32> = HashMap::new();
             let mut footprint_box =
-                vec![[i64::MAX, i64::MAX, i64::MIN, i64::MIN]; charts.count as usize];
+                vec![[i64::MAX, i64::MAX, i64::MIN, i64::MIN]; atlas.charts.count as usize];
+            let mut owned = 0usize;
             for (k, t) in range.clone().enumerate() {
                 let corners = cache.triangle_uv1(t).map(|p| p * size);
+                let [a, b, c] = tris[k];
                 let mut texels = Vec::new();
                 conservative_texels(corners, [0, 0, w, h], |x, y| texels.push((x, y)));
+                if (b - a).cross(c - a).length() == 0.0 {
+                    continue;
+                }
                 assert!(!texels.is_empty(), "triangle {t} has no texel");
+                let chart = atlas.charts.chart[k];
+                let [bx, by, bw, bh] = atlas.chart_texels[chart as usize];
+                assert!(
+                    texels
+                        .iter()
+                        .all(|&(x, y)| x >= bx && y >= by && x < bx + bw && y < by + bh),
+                    "triangle {t} outside its chart's box"
+                );
                 // Conservative: every point of the triangle lies in a footprint texel.
                 let mut rng = Rng::new(t as u64, 1);
                 for _ in 0..200 {
@@ -474,7 +542,6 @@ fn generated_charts_do_not_overlap_and_cover_every_triangle() {
                         "triangle {t}: {p} outside its footprint"
                     );
                 }
-                let chart = charts.chart[k];
                 for &(x, y) in &texels {
                     let fb = &mut footprint_box[chart as usize];
                     fb[0] = fb[0].min(x as i64);
@@ -485,6 +552,9 @@ fn generated_charts_do_not_overlap_and_cover_every_triangle() {
                     for dy in -g..=g {
                         for dx in -g..=g {
                             let key = (x as i64 + dx, y as i64 + dy);
+                            if (dx, dy) == (0, 0) && !claimed.contains_key(&key) {
+                                owned += 1;
+                            }
                             let owner = *claimed.entry(key).or_insert(chart);
                             assert_eq!(
                                 owner, chart,
@@ -495,27 +565,47 @@ fn generated_charts_do_not_overlap_and_cover_every_triangle() {
                 }
             }
             // Charts and their gutters stay inside the texture.
-            for fb in &footprint_box {
+            for fb in footprint_box.iter().filter(|fb| fb[0] <= fb[2]) {
                 let g = gutter as i64;
                 assert!(fb[0] >= g && fb[1] >= g && fb[2] + g < w as i64 && fb[3] + g < h as i64);
             }
             if inst == 1 {
                 // The unit grid spans 32 texels from texel centre to texel centre.
                 let fb = footprint_box[0];
-                assert_eq!((fb[2] - fb[0] + 1, fb[3] - fb[1] + 1), (33, 33));
+                if density == 32.0 {
+                    assert_eq!((fb[2] - fb[0] + 1, fb[3] - fb[1] + 1), (33, 33));
+                }
                 let lo = range
                     .clone()
                     .flat_map(|t| cache.triangle_uv1(t))
                     .fold(Vec2::INFINITY, |a, p| a.min(p * size));
                 assert!((lo - Vec2::splat(gutter as f32 + 0.5)).abs().max_element() < 1e-3);
             }
-            // No texel centre lies inside two triangles: the charts are flat, unfolded.
-            let mut inside = vec![0u8; (w * h) as usize];
+            // Texels follow the surface area: the curved meshes at 32 texels/m, laid out
+            // in a few charts, cover at most 1.5 times their area's texels.
+            let area: f32 = tris
+                .iter()
+                .map(|&[a, b, c]| 0.5 * (b - a).cross(c - a).length())
+                .sum();
+            if inst >= 4 && density == 32.0 {
+                let ideal = area * density * density;
+                assert!(
+                    (owned as f32) < 1.5 * ideal,
+                    "{}: {owned} texels for {ideal}",
+                    traced.instance_names[inst]
+                );
+            }
+            // No point at a quarter-texel pitch lies inside two triangles.
+            let mut inside = vec![0u8; (16 * w * h) as usize];
             for t in range {
-                let [a, b, c] = cache.triangle_uv1(t).map(|p| p * size);
+                let [a, b, c] = cache.triangle_uv1(t).map(|p| p * size * 4.0);
                 let area = (b - a).perp_dot(c - a);
-                for y in 0..h {
-                    for x in 0..w {
+                if area == 0.0 {
+                    continue;
+                }
+                let (lo, hi) = (a.min(b).min(c).max(Vec2::ZERO), a.max(b).max(c));
+                for y in lo.y as u32..(hi.y.ceil() as u32).min(4 * h) {
+                    for x in lo.x as u32..(hi.x.ceil() as u32).min(4 * w) {
                         let q = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                         let l = [
                             (b - q).perp_dot(c - q),
@@ -524,7 +614,7 @@ fn generated_charts_do_not_overlap_and_cover_every_triangle() {
                         ]
                         .map(|e| e / area);
                         if l.iter().all(|&e| e > 1e-4) {
-                            inside[(y * w + x) as usize] += 1;
+                            inside[(y * 4 * w + x) as usize] += 1;
                         }
                     }
                 }
