@@ -137,6 +137,7 @@ pub fn sky_minus_blockers(x: Vec3, n: Vec3, blockers: &[Vec<Vec3>], radiance: f3
         .map(|p| polygon_irradiance(x, n, &p, radiance))
         .sum();
     PI * radiance - blocked
+}
 
 /// Small settings that keep a Cornell bake to about a second: no bounce passes (full
 /// paths), a 10 % bound, 8 samples per metre, two threads.
@@ -164,3 +165,4 @@ pub fn expect_success(out: &Output, what: &str) {
         out.status,
         String::from_utf8_lossy(&out.stderr)
     );
+}
