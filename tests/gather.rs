@@ -1,0 +1,52 @@
+//! Bounce passes against the closed form they must sum to (issue #13): a closed box whose
+//! inner walls emit Le with albedo ρ holds E = π Le / (1 − ρ) everywhere inside, the
+//! geometric series of bounces. A complete bake ([`common::bake`]: direct light, bounce
+//! passes gathered from the cache until the series has converged, then the final pass)
+//! must reach it within 4·C·E for irradiance maps and lightmaps; stopping the series
+//! early, or gathering with a wrong ρ/π factor, misses it by far more.
+
+mod common;
+
+use common::{bake, estimator, instance, lookup, traced};
+use std::f32::consts::PI;
+use surfcache::cache::{CacheSettings, IrradianceMapSettings, LightmapSettings};
+use surfcache::core::{Environment, Material, glam::Vec3, scenes::cuboid};
+
+#[test]
+fn furnace_box_through_bounce_passes_sums_the_series() {
+    let (le, rho) = (Vec3::new(1.0, 2.0, 0.5), 0.6);
+    let expected = PI * le / (1.0 - rho);
+    let wall = Material::emissive("wall", Vec3::splat(rho), le);
+    let mesh = cuboid("box", Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0), true);
+    let scene = traced(vec![instance(mesh, wall)], Environment::black());
+    let rel = 0.02;
+    for settings in [
+        CacheSettings::IrradianceMap(IrradianceMapSettings {
+            both_sides: false,
+            ..Default::default()
+        }),
+        CacheSettings::Lightmap(LightmapSettings {
+            both_sides: false,
+            ..Default::default()
+        }),
+    ] {
+        let (cache, _) = bake(&scene, settings, estimator(rel));
+        let points = [
+            (Vec3::new(0.5, 0.0, 1.5), Vec3::Y),
+            (Vec3::new(0.5, 2.0, 0.7), Vec3::NEG_Y),
+            (Vec3::new(0.0, 1.0, 2.5), Vec3::X),
+            (Vec3::new(0.9, 0.2, 3.0), Vec3::NEG_Z),
+        ];
+        for (x, n) in points {
+            let got = lookup(cache.as_ref(), &scene, x, n);
+            for c in 0..3 {
+                let tol = 4.0 * rel * expected[c] + expected[c] / 1024.0;
+                assert!(
+                    (got[c] - expected[c]).abs() <= tol,
+                    "{}: channel {c} at {x}: {got} against {expected}",
+                    cache.method().name()
+                );
+            }
+        }
+    }
+}
