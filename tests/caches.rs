@@ -23,7 +23,7 @@
 
 mod common;
 
-use common::{CORNELL_FAST, expect_success};
+use common::{CORNELL_FAST, expect_success, lookup};
 use serde_json::Value;
 use std::f32::consts::PI;
 use std::path::{Path, PathBuf};
@@ -36,7 +36,7 @@ use surfcache::cache::{
 use surfcache::core::{
     Environment, EnvironmentMap, Instance, Light, Material, Mesh, Scene,
     geometry::orthonormal_basis,
-    glam::{Vec2, Vec3},
+    glam::Vec3,
     scenes::{append, cuboid, quad},
 };
 use surfcache::trace::{EstimatorSettings, Sampler, TracedScene};
@@ -99,23 +99,6 @@ fn bake(
         "{passes} passes"
     );
     (outcome.cache().clone(), floor)
-}
-
-/// The surface a world point with normal `n` lies on: (triangle, barycentrics, front).
-fn locate(scene: &TracedScene, x: Vec3, n: Vec3) -> (u32, Vec2, bool) {
-    let p = scene
-        .locate(x, n)
-        .unwrap_or_else(|| panic!("{x} is on no surface"));
-    let front = p
-        .geometric_normal
-        .dot(scene.geometric_normals[p.triangle as usize])
-        > 0.0;
-    (p.triangle, p.uv, front)
-}
-
-fn lookup(cache: &dyn SurfaceCache, scene: &TracedScene, x: Vec3, n: Vec3) -> Vec3 {
-    let (t, uv, front) = locate(scene, x, n);
-    cache.lookup(t, uv, front)
 }
 
 /// |got − expected| ≤ 4·rel·(expected + ε) + expected/1024 in every channel.

@@ -44,7 +44,7 @@ fn furnace_box_through_bounce_passes_sums_the_series() {
                 assert!(
                     (got[c] - expected[c]).abs() <= tol,
                     "{}: channel {c} at {x}: {got} against {expected}",
-                    cache.method().name()
+                    settings.method().name()
                 );
             }
         }

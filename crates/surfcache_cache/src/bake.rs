@@ -409,7 +409,7 @@ pub const MIN_FITTED_DENSITY: f32 = 8.0;
 /// The density a bake at `density` per metre uses on a scene whose surfaces have `area`
 /// m² (one side) within `budget` samples: `min(density, max(MIN, sqrt(budget / area)))`.
 pub fn fitted_density(density: f32, area: f64, budget: u64) -> f32 {
-    if !(area > 0.0) {
+    if area.is_nan() || area <= 0.0 {
         return density;
     }
     let fit = (budget as f64 / area).sqrt() as f32;
@@ -673,7 +673,7 @@ impl BakeJob {
         }
         let areas = scene.area_distribution();
         let both = self.settings.cache.both_sides();
-        let mut rng = Rng::new(self.settings.seed ^ 0x9806_e5, 0);
+        let mut rng = Rng::new(self.settings.seed ^ 0x0098_06e5, 0);
         self.probes = (0..BOUNCE_PROBES)
             .map(|_| {
                 let (t, _, _) = areas.sample(rng.next_f32());

@@ -228,7 +228,8 @@ pub fn generate_atlas(
             w[0] == w[1]
                 || w[1] == w[2]
                 || w[2] == w[0]
-                || !((*b - *a).cross(*c - *a).length() > 0.0)
+                || (*b - *a).cross(*c - *a).length().is_nan()
+                || (*b - *a).cross(*c - *a).length() <= 0.0
         })
         .collect();
     let mesh = ChartMesh::new(positions, normals, &weld, &degenerate);

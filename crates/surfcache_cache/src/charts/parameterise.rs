@@ -166,7 +166,7 @@ pub fn singular_values(p: [Vec3; 3], q: [Vec2; 3]) -> Option<(f32, f32)> {
     let e2 = Vec2::new((c - a).dot(u), (c - a).dot(v));
     let world = Mat2::from_cols(e1, e2);
     let det = world.determinant();
-    if !(det.abs() > 0.0) {
+    if det.is_nan() || det == 0.0 {
         return None;
     }
     let j = Mat2::from_cols(q[1] - q[0], q[2] - q[0]) * world.inverse();
@@ -324,7 +324,7 @@ fn conformal_map(mesh: &ChartMesh, g: &Grown) -> Vec<Vec2> {
             }
         }
         let pq = dot(&p, &q);
-        if !(pq > 0.0) {
+        if pq.is_nan() || pq <= 0.0 {
             break;
         }
         let alpha = (rz / pq) as f32;
@@ -399,7 +399,7 @@ fn triangles_overlap(p: [Vec2; 3], q: [Vec2; 3], epsilon: f32) -> bool {
         for k in 0..3 {
             let axis = (tri[(k + 1) % 3] - tri[k]).perp();
             let length = axis.length();
-            if !(length > 0.0) {
+            if length.is_nan() || length <= 0.0 {
                 continue;
             }
             any_axis = true;
