@@ -9,7 +9,9 @@
 //! [`PROBE_DIRECTIONS`] rays run parallel to the surface, as far as the patch reaches. A
 //! surface that meets or pierces the patch stops one of them; surfaces of the same smooth
 //! mesh (within [`SAME_SURFACE_DEGREES`] of the patch's normal, e.g. a concave curve
-//! rising from the lifted ray) are not crossings.
+//! rising from the lifted ray) are not crossings, nor are surfaces that meet the
+//! triangle only along its boundary (the neighbouring wall at a box's concave edge: no
+//! corner of the triangle lies beyond it).
 //!
 //! What a probe tells ([`Probe`]):
 //! - whether the patch is crossed, and the crossing nearest to the sample: a line in the
@@ -67,6 +69,8 @@ pub fn probe(scene: &TracedScene, triangle: u32, uv: Vec2, front: bool, reach: f
     let same = SAME_SURFACE_DEGREES.to_radians().cos();
     let [a, b, c] = scene.positions[triangle as usize];
     let off = scene.spawn_offset();
+    let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+    let boundary_tolerance = (4.0 * off).max(1e-4 * longest);
     let mut best: Option<(f32, CrossingLine)> = None;
     let mut exit: Option<(f32, Vec2)> = None;
     for k in 0..PROBE_DIRECTIONS {
@@ -89,8 +93,21 @@ pub fn probe(scene: &TracedScene, triangle: u32, uv: Vec2, front: bool, reach: f
         };
         let mut normal = mu.cross(along);
         let q = origin + d * t - mu * off;
-        if normal.dot(p.position - q) < 0.0 {
+        // The probe ran from the sample's side towards the crossing: orient by the ray,
+        // not by the sample point, which may lie on the line (a sample on the edge where a
+        // wall stands).
+        if normal.dot(d) > 0.0 {
             normal = -normal;
+        }
+        // A surface meeting this triangle only along or beyond its boundary (the next wall
+        // at a box's concave edge) cuts no patch of it: a crossing must leave some corner
+        // of the triangle on its far side.
+        let far = [a, b, c]
+            .iter()
+            .map(|&v| normal.dot(v - q))
+            .fold(f32::INFINITY, f32::min);
+        if far > -boundary_tolerance {
+            continue;
         }
         if best.is_none_or(|(tb, _)| t < tb) {
             best = Some((t, CrossingLine { point: q, normal }));

@@ -388,7 +388,9 @@ impl TexelEstimate {
     /// Merges an independent estimate of the same texel: means weighted by sample
     /// counts, `σ² = (n_a² σ_a² + n_b² σ_b²) / (n_a + n_b)²`. An estimate that is exactly
     /// zero (every sample was zero: in a gathering pass every ray met unlit surfaces)
-    /// counts as exact.
+    /// counts as exact. An estimate without samples (a re-bake's prior kept as it is,
+    /// [`surfcache_trace::irradiance::unchanged`]) is taken as it is until samples
+    /// arrive.
     fn merge(&mut self, e: &Estimate) {
         let variance = if e.value == Vec3::ZERO {
             Vec3::ZERO
@@ -398,6 +400,8 @@ impl TexelEstimate {
         let (na, nb) = (self.samples as f32, e.samples as f32);
         let n = na + nb;
         if n == 0.0 {
+            self.mean = e.value;
+            self.variance = variance;
             return;
         }
         self.mean = (self.mean * na + e.value * nb) / n;
@@ -730,7 +734,11 @@ pub(crate) fn texels_overlapped_by(
 ) {
     let [a, b, c] = corners;
     let twice_area = (b - a).perp_dot(c - a);
-    if !(twice_area.is_finite() && twice_area != 0.0) || clip[2] == 0 || clip[3] == 0 {
+    if !twice_area.is_finite() || clip[2] == 0 || clip[3] == 0 {
+        return;
+    }
+    if twice_area == 0.0 {
+        segment_texels(corners, clip, epsilon, f);
         return;
     }
     let sign = twice_area.signum();
@@ -771,6 +779,51 @@ pub(crate) fn texels_overlapped_by(
         let x = (centroid.x.floor().max(0.0) as u32).clamp(clip[0], cx1);
         let y = (centroid.y.floor().max(0.0) as u32).clamp(clip[1], cy1);
         f(x, y);
+    }
+}
+
+/// [`texels_overlapped_by`] for a triangle whose corners are collinear in UV1 (a chart of
+/// a sliver whose parameterisation has no area): the texels whose centre lies within
+/// ½ − `epsilon` of the segment the corners span, else the texel holding its midpoint.
+fn segment_texels(corners: [Vec2; 3], clip: [u32; 4], epsilon: f32, mut f: impl FnMut(u32, u32)) {
+    let [a, b, c] = corners;
+    let (p, q) = [(a, b), (b, c), (c, a)]
+        .into_iter()
+        .max_by(|x, y| {
+            (x.1 - x.0)
+                .length_squared()
+                .total_cmp(&(y.1 - y.0).length_squared())
+        })
+        .unwrap_or((a, b));
+    let radius = 0.5 - epsilon;
+    let (lo, hi) = (
+        p.min(q) - Vec2::splat(radius),
+        p.max(q) + Vec2::splat(radius),
+    );
+    let (cx1, cy1) = (clip[0] + clip[2] - 1, clip[1] + clip[3] - 1);
+    let x0 = (lo.x.floor().max(0.0) as u32).clamp(clip[0], cx1);
+    let y0 = (lo.y.floor().max(0.0) as u32).clamp(clip[1], cy1);
+    let x1 = (hi.x.floor().max(0.0) as u32).clamp(clip[0], cx1);
+    let y1 = (hi.y.floor().max(0.0) as u32).clamp(clip[1], cy1);
+    let along = q - p;
+    let length_squared = along.length_squared().max(f32::MIN_POSITIVE);
+    let mut any = false;
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let s = ((centre - p).dot(along) / length_squared).clamp(0.0, 1.0);
+            if (p + along * s - centre).length() <= radius {
+                any = true;
+                f(x, y);
+            }
+        }
+    }
+    if !any {
+        let mid = 0.5 * (p + q);
+        f(
+            (mid.x.floor().max(0.0) as u32).clamp(clip[0], cx1),
+            (mid.y.floor().max(0.0) as u32).clamp(clip[1], cy1),
+        );
     }
 }
 
@@ -930,17 +983,24 @@ fn bilinear_packed(
         (x0, y1, (1.0 - fx) * fy),
         (x1, y1, fx * fy),
     ];
-    let (mut sum, mut weight, mut plain) = (Vec3::ZERO, 0.0f32, Vec3::ZERO);
-    for (i, j, w) in taps {
-        let k = (j * width + i) as usize;
-        let v = scale.unpack(texels[k]);
-        plain += v * w;
-        if w > 0.0 && same_side(k) {
-            sum += v * w;
-            weight += w;
-        }
+    let keys = taps.map(|(i, j, _)| (j * width + i) as usize);
+    let values = keys.map(|k| scale.unpack(texels[k]));
+    let kept = std::array::from_fn::<bool, 4, _>(|n| taps[n].2 <= 0.0 || same_side(keys[n]));
+    // Exactly the published texture's bilinear ([`crate::texture::bilinear`]).
+    let plain = || {
+        let top = values[0] * (1.0 - fx) + values[1] * fx;
+        let bottom = values[2] * (1.0 - fx) + values[3] * fx;
+        top * (1.0 - fy) + bottom * fy
+    };
+    if kept.iter().all(|&k| k) {
+        return plain();
     }
-    if weight > 0.0 { sum / weight } else { plain }
+    let (mut sum, mut weight) = (Vec3::ZERO, 0.0f32);
+    for n in (0..4).filter(|&n| kept[n] && taps[n].2 > 0.0) {
+        sum += values[n] * taps[n].2;
+        weight += taps[n].2;
+    }
+    if weight > 0.0 { sum / weight } else { plain() }
 }
 
 /// A crossing line of the footprint of the texel sampled at barycentrics `uv` of

@@ -6,6 +6,7 @@ mod common;
 
 use common::{Points, bake_synthetic};
 use std::collections::HashSet;
+use surfcache_cache::stored_rgb::STORED_RGB_BYTES;
 use surfcache_cache::{
     SampleSite, SurfaceCache,
     irradiance_map::{
@@ -166,7 +167,7 @@ fn triangles_within_one_sample_spacing_keep_order_one_grids() {
     );
     let stats = maps.stats();
     assert_eq!(stats.order_histogram.get(&1), Some(&4));
-    assert_eq!(stats.cache_bytes, 4 * 12 + 5 * 4 + 4);
+    assert_eq!(stats.cache_bytes, STORED_RGB_BYTES * 12 + 5 * 4 + 4);
     let mut rng = Points(9);
     for t in 0..2u32 {
         let [a, b, c] = traced.positions[t as usize];
@@ -425,7 +426,7 @@ fn vertex_lighting_estimates_each_mesh_vertex_once_per_side() {
     assert_eq!(keys.len(), 36);
     let stats = vl.stats();
     assert_eq!(stats.sample_points, 36);
-    assert_eq!(stats.cache_bytes, 4 * 36 + 12 * 16 + 4);
+    assert_eq!(stats.cache_bytes, STORED_RGB_BYTES * 36 + 12 * 16 + 4);
     // E is linear in position here, so barycentric interpolation is exact.
     let mut rng = Points(3);
     for t in 0..16u32 {
@@ -524,7 +525,7 @@ fn coplanar_triangles_share_their_corners() {
     assert_eq!(maps.stats().sample_points, 20);
     assert_eq!(
         maps.stats().cache_bytes,
-        4 * 3 * 24 + 5 * 48 + 4,
+        STORED_RGB_BYTES * 3 * 24 + 5 * 48 + 4,
         "every grid stores its copies"
     );
     let values = corner_values(&maps, &traced);
