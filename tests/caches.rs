@@ -21,6 +21,9 @@
 //! rounding (1/512 of the largest channel). Planes alone in the world see nothing but the
 //! sky, so gathering adds no bias there; in the shadow test every other surface is black.
 
+mod common;
+
+use common::{CORNELL_FAST, expect_success};
 use serde_json::Value;
 use std::f32::consts::PI;
 use std::path::{Path, PathBuf};
@@ -175,16 +178,6 @@ fn surfcache(args: &[&str]) -> Output {
 
 fn stderr_of(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-#[track_caller]
-fn expect_success(out: &Output, what: &str) {
-    assert!(
-        out.status.success(),
-        "{what} failed: {:?}\n{}",
-        out.status,
-        stderr_of(out)
-    );
 }
 
 /// Non-zero exit, nothing on stdout, exactly one stderr line `error: …` holding `needle`.
@@ -548,24 +541,6 @@ fn box_shadow_under_directional_light_maps_and_lightmaps() {
 // ---------------------------------------------------------------------------------------
 // The command line on the Cornell box: determinism and query
 // ---------------------------------------------------------------------------------------
-
-/// Small settings that keep a Cornell bake to about a second: no gathering pre-pass
-/// (whose fixed 32-per-metre maps would take most of the time), a 10 % bound, 8 samples
-/// per metre.
-const CORNELL_FAST: [&str; 12] = [
-    "--max-rel-error",
-    "0.1",
-    "--density",
-    "8",
-    "--gather",
-    "0",
-    "--min-samples",
-    "64",
-    "--max-samples",
-    "4096",
-    "--threads",
-    "2",
-];
 
 fn bake_cornell(out_dir: &Path, seed: u64) {
     let seed = seed.to_string();

@@ -8,7 +8,8 @@
 //!   `no_panic` would catch it: a panic hook records every panic of the process, and the
 //!   fuzz tests of this binary run one at a time (the loaders use rayon threads, so a
 //!   thread-local record would miss panics on worker threads);
-//! - on `Err`, give a one-line message;
+//! - on `Err`, give one printable line: no line breaks, terminal escapes or other control
+//!   or invisible format characters, whatever the file's names hold;
 //! - on `Ok`, return only finite data: positions (also in world space), normals, UVs,
 //!   transforms, materials, textures and lights of a `Scene`, texels of a map.
 //!
@@ -29,12 +30,16 @@
 //! Long run (≥ 100,000 cases in total over all loaders, random seed, prints a summary):
 //!
 //! ```text
-//! SURFCACHE_FUZZ_CASES=100000 cargo test --release --test fuzz_loaders -- --ignored --nocapture
+//! SURFCACHE_FUZZ_CASES=100000 cargo test --release --test fuzz_loaders long_run -- --ignored --nocapture
 //! ```
 //!
 //! `SURFCACHE_FUZZ_CASES` is the total for the long run (default 100,000), split between
-//! the loaders by weight. `SURFCACHE_FUZZ_SEED=N` fixes the seed of either run (a failure
-//! prints the seed it used, and proptest shrinks the mutation list to a minimal one).
+//! the loaders by weight; each loader's cases use the run's seed plus its weight.
+//! `SURFCACHE_FUZZ_SEED=N` fixes the seed of either run, `SURFCACHE_FUZZ_TARGETS=exr,glb`
+//! limits the long run to some loaders (with the cases they get in the full run). A failure
+//! prints proptest's minimal failing input (it shrinks the mutation list) and the command
+//! that runs the failing loader's cases again; such a case then becomes a fixed case here
+//! (`exr_cases_that_failed_before`), since a short run's random cases need not come near it.
 
 use proptest::prelude::*;
 use proptest::sample::Index;
@@ -176,11 +181,13 @@ fn seed(default: Option<u64>) -> u64 {
 
 /// Runs `cases` cases of `property` on inputs from `strategy`. `property` loads the file it
 /// writes and returns (the file, the loader's outcome as `Ok(())` or the error's message), or
-/// a violated property as `Err`. Panics with the minimal failing input.
+/// a violated property as `Err`. Panics with the minimal failing input and `rerun`, the
+/// command that runs the failing cases again.
 fn fuzz<S: Strategy>(
     name: &str,
     cases: u32,
     seed: u64,
+    rerun: &str,
     strategy: S,
     property: impl Fn(&S::Value) -> Result<(PathBuf, Result<(), String>), String>,
 ) -> Stats
@@ -216,7 +223,7 @@ where
         Ok(())
     });
     if let Err(e) = result {
-        panic!("{name} (SURFCACHE_FUZZ_SEED={seed}): {e}");
+        panic!("{name} (case seed {seed}; again: {rerun}): {e}");
     }
     let stats = stats.into_inner();
     stats.print(name, cases, started.elapsed().as_secs_f64(), 8);
@@ -233,13 +240,23 @@ fn temp_dir(name: &str) -> PathBuf {
     dir
 }
 
-/// An `IoError` message, which must be one line.
+/// An `IoError` message, which must be one printable line.
 fn message(e: &surfcache::io::IoError) -> Result<String, String> {
     let m = e.to_string();
-    if m.contains('\n') || m.is_empty() {
-        return Err(format!("error message is not one line: {m:?}"));
+    if m.is_empty() || !printable(&m) {
+        return Err(format!("error message is not one printable line: {m:?}"));
     }
     Ok(m)
+}
+
+/// Whether a message holds no control characters (C0, DEL, C1: line breaks, terminal
+/// escapes) and none of the invisible format characters that reorder or hide text.
+fn printable(m: &str) -> bool {
+    !m.chars().any(|c| {
+        c.is_control()
+            || matches!(c, '\u{200b}'..='\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2028}'
+                | '\u{2029}' | '\u{2066}'..='\u{2069}' | '\u{feff}' | '\u{61c}')
+    })
 }
 
 // --- mutations ------------------------------------------------------------------------------
@@ -339,12 +356,40 @@ const NUMBER_TOKENS: &[&str] = &[
 
 /// Tokens inserted into JSON text.
 const JSON_TOKENS: &[&str] = &[
-    "{", "}", "[", "]", ",", ":", "\"", "\\", "null", "true", "-", "0", "1e39", "\"\":", "\\u0000",
-    "\\ud800", "{}", "[]", "\u{feff}", "\u{0}", "\u{ffff}",
+    "{",
+    "}",
+    "[",
+    "]",
+    ",",
+    ":",
+    "\"",
+    "\\",
+    "null",
+    "true",
+    "-",
+    "0",
+    "1e39",
+    "\"\":",
+    "\\u0000",
+    "\\ud800",
+    "{}",
+    "[]",
+    "\u{feff}",
+    "\u{0}",
+    "\u{ffff}",
+    "\\n",
+    "\\r",
+    "\\u001b[2J",
+    "\\u009b",
+    "\\u202e",
+    "\u{1b}",
+    "\n",
+    "\u{9b}",
 ];
 
 /// Keys added to objects of the document, most of them glTF properties.
 const JSON_KEYS: &[&str] = &[
+    "name",
     "byteOffset",
     "byteLength",
     "byteStride",
@@ -453,6 +498,10 @@ fn json_values() -> &'static [Value] {
             json!(1e-45),
             json!(""),
             json!("x"),
+            json!("\u{1b}[31mred\n\r\u{9b}2J\u{202e}\u{2028}"),
+            json!("x".repeat(300)),
+            json!("\u{1b}[2J.bin"),
+            json!("\u{1b}[2J%ff.png"),
             json!("SCALAR"),
             json!("VEC2"),
             json!("VEC4"),
@@ -888,8 +937,8 @@ fn check_scene(path: &Path) -> Result<(PathBuf, Result<(), String>), String> {
             if let Some(problem) = scene_problem(&loaded.scene) {
                 return Err(format!("loaded with {problem}"));
             }
-            if let Some(w) = loaded.report.warnings.iter().find(|w| w.contains('\n')) {
-                return Err(format!("warning is not one line: {w:?}"));
+            if let Some(w) = loaded.report.warnings.iter().find(|w| !printable(w)) {
+                return Err(format!("warning is not one printable line: {w:?}"));
             }
             Ok(())
         }
@@ -1292,10 +1341,10 @@ fn gltf_case() -> impl Strategy<Value = GltfCase> {
         .prop_map(|(seed, text, bin)| GltfCase { seed, text, bin })
 }
 
-fn fuzz_gltf_json(cases: u32, seed: u64) -> Stats {
+fn fuzz_gltf_json(cases: u32, seed: u64, rerun: &str) -> Stats {
     let seeds = gltf_seeds();
     let dir = temp_dir("gltf_json");
-    fuzz("glTF JSON", cases, seed, gltf_case(), |case| {
+    fuzz("glTF JSON", cases, seed, rerun, gltf_case(), |case| {
         let s = &seeds[case.seed.index(seeds.len())];
         let mut text = gltf_text(&s.json);
         if s.name == "cornell" {
@@ -1319,12 +1368,12 @@ struct BinCase {
     bin: Vec<ByteEdit>,
 }
 
-fn fuzz_gltf_bin(cases: u32, seed: u64) -> Stats {
+fn fuzz_gltf_bin(cases: u32, seed: u64, rerun: &str) -> Stats {
     let seeds = gltf_seeds();
     let dir = temp_dir("gltf_bin");
     let strategy = (seed_index(), prop::collection::vec(byte_edit(), 1..6))
         .prop_map(|(seed, bin)| BinCase { seed, bin });
-    fuzz("glTF buffer", cases, seed, strategy, |case| {
+    fuzz("glTF buffer", cases, seed, rerun, strategy, |case| {
         let s = &seeds[case.seed.index(seeds.len())];
         let mut bin = s.bin.clone();
         for e in &case.bin {
@@ -1375,12 +1424,12 @@ fn glb_edit() -> impl Strategy<Value = GlbEdit> {
     ]
 }
 
-fn fuzz_glb(cases: u32, seed: u64) -> Stats {
+fn fuzz_glb(cases: u32, seed: u64, rerun: &str) -> Stats {
     let seeds = gltf_seeds();
     let dir = temp_dir("glb");
     let strategy = (seed_index(), prop::collection::vec(glb_edit(), 1..4))
         .prop_map(|(seed, edits)| GlbCase { seed, edits });
-    fuzz("GLB", cases, seed, strategy, |case| {
+    fuzz("GLB", cases, seed, rerun, strategy, |case| {
         let s = &seeds[case.seed.index(seeds.len())];
         let mut json = glb_text(&s.json, s.bin.len());
         let mut bin = s.bin.clone();
@@ -1465,6 +1514,10 @@ struct ExrSeed {
     layout: ExrLayout,
 }
 
+/// Bytes no terminal should receive raw: line breaks, ESC, DEL, a C1 CSI, bytes that are
+/// not UTF-8 on their own.
+const HOSTILE_BYTES: &[u8] = &[b'\n', b'\r', 0x1b, 0x7f, 0x9b, 0x85, 0xc3, 0xff];
+
 const EXR_TYPES: &[&str] = &[
     "box2i",
     "chlist",
@@ -1500,6 +1553,13 @@ enum ExrEdit {
         at: Index,
         xor: u8,
     },
+    /// A byte of an attribute's value (a channel or attribute name, say) set to one of
+    /// [`HOSTILE_BYTES`].
+    AttrByte {
+        attr: Index,
+        at: Index,
+        byte: Index,
+    },
     /// An attribute's type name replaced by another.
     AttrType {
         attr: Index,
@@ -1528,6 +1588,8 @@ fn exr_edit() -> impl Strategy<Value = ExrEdit> {
             .prop_map(|(attr, at, value)| ExrEdit::AttrWord { attr, at, value }),
         2 => (any::<Index>(), any::<Index>(), 1..=255u8)
             .prop_map(|(attr, at, xor)| ExrEdit::AttrFlip { attr, at, xor }),
+        1 => (any::<Index>(), any::<Index>(), any::<Index>())
+            .prop_map(|(attr, at, byte)| ExrEdit::AttrByte { attr, at, byte }),
         1 => (any::<Index>(), any::<Index>())
             .prop_map(|(attr, name)| ExrEdit::AttrType { attr, name }),
         2 => (any::<Index>(), -64..64i64, prop::option::of(any::<Index>()))
@@ -1566,6 +1628,14 @@ impl ExrEdit {
                     && let Some(b) = bytes.get_mut(start + at.index(end - start))
                 {
                     *b ^= xor;
+                }
+            }
+            ExrEdit::AttrByte { attr: a, at, byte } => {
+                let (start, end) = attr(a).value;
+                if end > start
+                    && let Some(b) = bytes.get_mut(start + at.index(end - start))
+                {
+                    *b = pick(HOSTILE_BYTES, byte);
                 }
             }
             ExrEdit::AttrType { attr: a, name } => {
@@ -1717,7 +1787,7 @@ struct ExrCase {
     edits: Vec<ExrEdit>,
 }
 
-fn fuzz_exr(cases: u32, seed: u64) -> Stats {
+fn fuzz_exr(cases: u32, seed: u64, rerun: &str) -> Stats {
     let seeds = exr_seeds();
     let dir = temp_dir("exr");
     // Every seed reads cleanly.
@@ -1736,40 +1806,50 @@ fn fuzz_exr(cases: u32, seed: u64) -> Stats {
             environment,
             edits,
         });
-    fuzz("EXR", cases, seed, strategy, |case| {
+    fuzz("EXR", cases, seed, rerun, strategy, |case| {
         let s = &seeds[case.seed.index(seeds.len())];
         let mut bytes = s.bytes.clone();
         for e in &case.edits {
             e.apply(&mut bytes, &s.layout);
         }
-        let path = dir.join("case.exr");
-        std::fs::write(&path, &bytes).unwrap();
-        let outcome = if case.environment {
-            surfcache::io::read_environment_map(&path)
-                .map(|(map, warnings)| (map.width, map.height, map.texels, warnings))
-        } else {
-            surfcache::io::read_rgb_exr(&path).map(|(w, h, t)| (w, h, t, Vec::new()))
-        };
-        let outcome = match outcome {
-            Ok((w, h, texels, warnings)) => {
-                if w == 0 || h == 0 || texels.len() != w as usize * h as usize {
-                    return Err(format!("{w}×{h} image with {} texels", texels.len()));
-                }
-                if let Some(i) = texels.iter().position(|t| !t.is_finite()) {
-                    return Err(format!("texel {i} is {}", texels[i]));
-                }
-                if case.environment && texels.iter().any(|t| t.min_element() < 0.0) {
-                    return Err("negative texel in an environment map".into());
-                }
-                if let Some(w) = warnings.iter().find(|w| w.contains('\n')) {
-                    return Err(format!("warning is not one line: {w:?}"));
-                }
-                Ok(())
-            }
-            Err(e) => Err(message(&e)?),
-        };
-        Ok((path, outcome))
+        check_exr(&dir, &bytes, case.environment)
     })
+}
+
+/// Reads `bytes` as an EXR (an environment map or not): the outcome, or the violated
+/// property.
+fn check_exr(
+    dir: &Path,
+    bytes: &[u8],
+    environment: bool,
+) -> Result<(PathBuf, Result<(), String>), String> {
+    let path = dir.join("case.exr");
+    std::fs::write(&path, bytes).unwrap();
+    let outcome = if environment {
+        surfcache::io::read_environment_map(&path)
+            .map(|(map, warnings)| (map.width, map.height, map.texels, warnings))
+    } else {
+        surfcache::io::read_rgb_exr(&path).map(|(w, h, t)| (w, h, t, Vec::new()))
+    };
+    let outcome = match outcome {
+        Ok((w, h, texels, warnings)) => {
+            if w == 0 || h == 0 || texels.len() != w as usize * h as usize {
+                return Err(format!("{w}×{h} image with {} texels", texels.len()));
+            }
+            if let Some(i) = texels.iter().position(|t| !t.is_finite()) {
+                return Err(format!("texel {i} is {}", texels[i]));
+            }
+            if environment && texels.iter().any(|t| t.min_element() < 0.0) {
+                return Err("negative texel in an environment map".into());
+            }
+            if let Some(w) = warnings.iter().find(|w| !printable(w)) {
+                return Err(format!("warning is not one printable line: {w:?}"));
+            }
+            Ok(())
+        }
+        Err(e) => Err(message(&e)?),
+    };
+    Ok((path, outcome))
 }
 
 // --- the tests --------------------------------------------------------------------------------
@@ -1777,27 +1857,97 @@ fn fuzz_exr(cases: u32, seed: u64) -> Stats {
 /// Fixed seed of the short runs, so `cargo test` is reproducible.
 const SHORT_SEED: u64 = 0x5eed;
 
+/// A short run of `target`: `cases` cases with [`SHORT_SEED`] or `SURFCACHE_FUZZ_SEED`.
+fn short_run(test: &str, target: Target, cases: u32) {
+    let seed = seed(Some(SHORT_SEED));
+    let rerun = format!("SURFCACHE_FUZZ_SEED={seed} cargo test --test fuzz_loaders {test}");
+    target(cases, seed, &rerun);
+}
+
 #[test]
 fn gltf_json_mutations_never_panic() {
-    fuzz_gltf_json(400, seed(Some(SHORT_SEED)));
+    short_run("gltf_json_mutations_never_panic", fuzz_gltf_json, 400);
 }
 
 #[test]
 fn gltf_buffer_mutations_never_panic() {
-    fuzz_gltf_bin(250, seed(Some(SHORT_SEED)));
+    short_run("gltf_buffer_mutations_never_panic", fuzz_gltf_bin, 250);
 }
 
 #[test]
 fn glb_mutations_never_panic() {
-    fuzz_glb(400, seed(Some(SHORT_SEED)));
+    short_run("glb_mutations_never_panic", fuzz_glb, 400);
 }
 
 #[test]
 fn exr_mutations_never_panic() {
-    fuzz_exr(400, seed(Some(SHORT_SEED)));
+    short_run("exr_mutations_never_panic", fuzz_exr, 400);
 }
 
-/// The long run: `SURFCACHE_FUZZ_CASES` cases in total (default 100,000), random seed.
+/// Cases a long run once failed on, kept here as fixed cases (a short run's random ones need
+/// not come near them again, and a change of the strategies changes what a seed generates):
+///
+/// - `SURFCACHE_FUZZ_SEED=1796197522859263124`, EXR target (case seed …127), minimal input:
+///   seed 2, the channel list's first byte flipped by 0x48, so channel `B` is named `\n`;
+///   the error `EXR '…' has no R, G, B channels (found: \n, G, R)` broke over two lines.
+///
+/// The same edit with every byte of [`HOSTILE_BYTES`] and on every EXR seed, read as a
+/// texture and as an environment map.
+#[test]
+fn exr_cases_that_failed_before() {
+    let seeds = exr_seeds();
+    let _serial = serial();
+    let dir = temp_dir("exr_fixed");
+    take_panics();
+    for (k, s) in seeds.iter().enumerate() {
+        let channels = s
+            .layout
+            .attributes
+            .iter()
+            .find(|a| &s.bytes[a.type_name.0..a.type_name.1] == b"chlist")
+            .expect("every EXR has a channel list");
+        let first = channels.value.0;
+        let mut edits: Vec<u8> = HOSTILE_BYTES.iter().map(|b| b ^ s.bytes[first]).collect();
+        edits.push(0x48);
+        for xor in edits {
+            let mut bytes = s.bytes.clone();
+            bytes[first] ^= xor;
+            for environment in [false, true] {
+                let case = format!(
+                    "seed {k}, byte {:#04x}, environment {environment}",
+                    bytes[first]
+                );
+                let (_, outcome) =
+                    check_exr(&dir, &bytes, environment).unwrap_or_else(|e| panic!("{case}: {e}"));
+                let panics = take_panics();
+                assert!(panics.is_empty(), "{case}: panicked: {panics:?}");
+                if (k, xor) == (2, 0x48) {
+                    let e = outcome.expect_err("channel B is gone");
+                    assert!(
+                        e.ends_with(r"has no R, G, B channels (found: \n, G, R)"),
+                        "{e}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// A fuzz target: (cases, case seed, command to run it again) → what the loader returned.
+type Target = fn(u32, u64, &str) -> Stats;
+
+/// The long run's targets: name (for `SURFCACHE_FUZZ_TARGETS`), weight (its share of the
+/// cases in tenths, and what is added to the run's seed for its own), function.
+const TARGETS: [(&str, u64, Target); 4] = [
+    ("gltf_json", 3, fuzz_gltf_json),
+    ("gltf_bin", 2, fuzz_gltf_bin),
+    ("glb", 2, fuzz_glb),
+    ("exr", 3, fuzz_exr),
+];
+
+/// The long run: `SURFCACHE_FUZZ_CASES` cases in total (default 100,000), random seed;
+/// `SURFCACHE_FUZZ_TARGETS=exr,glb` runs only those targets (with the cases they would get
+/// in the full run, so a seed's failure comes again).
 #[test]
 #[ignore = "long fuzzing run; see the module docs"]
 fn long_run() {
@@ -1809,23 +1959,34 @@ fn long_run() {
                 .expect("SURFCACHE_FUZZ_CASES must be a number")
         })
         .unwrap_or(100_000);
+    let only: Option<Vec<String>> = std::env::var("SURFCACHE_FUZZ_TARGETS")
+        .ok()
+        .map(|s| s.split(',').map(|t| t.trim().to_string()).collect());
+    if let Some(only) = &only {
+        for t in only {
+            assert!(
+                TARGETS.iter().any(|(name, _, _)| name == t),
+                "unknown fuzz target '{t}' in SURFCACHE_FUZZ_TARGETS (known: gltf_json, gltf_bin, glb, exr)"
+            );
+        }
+    }
     let seed = seed(None);
     println!("long run: {total} cases, SURFCACHE_FUZZ_SEED={seed}");
     let share = |weight: u64| (total * weight).div_ceil(10) as u32;
     let started = Instant::now();
     let mut done = 0u64;
-    type Target = fn(u32, u64) -> Stats;
-    let targets: [(u64, Target); 4] = [
-        (3, fuzz_gltf_json),
-        (2, fuzz_gltf_bin),
-        (2, fuzz_glb),
-        (3, fuzz_exr),
-    ];
     // Every target runs even when an earlier one fails (each stops at its first failure).
     let mut failures = Vec::new();
-    for (weight, target) in targets {
+    for (name, weight, target) in TARGETS {
+        if only.as_ref().is_some_and(|o| !o.iter().any(|t| t == name)) {
+            continue;
+        }
         let cases = share(weight);
-        match std::panic::catch_unwind(|| target(cases, seed.wrapping_add(weight))) {
+        let rerun = format!(
+            "SURFCACHE_FUZZ_SEED={seed} SURFCACHE_FUZZ_CASES={total} SURFCACHE_FUZZ_TARGETS={name} \
+             cargo test --release --test fuzz_loaders long_run -- --ignored --nocapture"
+        );
+        match std::panic::catch_unwind(|| target(cases, seed.wrapping_add(weight), &rerun)) {
             Ok(_) => done += cases as u64,
             Err(payload) => failures.push(
                 payload

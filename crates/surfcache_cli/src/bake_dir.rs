@@ -1,17 +1,20 @@
 //! The bake output directory: written in a staging directory beside it and renamed into
 //! place only when complete, so a failed or interrupted bake never leaves anything that
-//! `query` could mistake for a finished bake.
+//! `query` could mistake for a finished bake, and what a killed bake left is removed by the
+//! next bake of the same output.
 
 use crate::scene_args::LoadedWorld;
 use anyhow::{Context, Result, bail};
 use serde_json::{Value, json};
 use std::{
     collections::HashSet,
+    ffi::{OsStr, OsString},
+    fs::File,
     path::{Path, PathBuf},
     sync::Arc,
 };
 use surfcache_cache::{Cache, IrradianceTexture, archive::BakeArchive};
-use surfcache_io::LightmapRef;
+use surfcache_io::{LightmapRef, Untrusted};
 use surfcache_trace::TracedScene;
 
 /// Name of the archive `query` reads.
@@ -19,57 +22,74 @@ pub const ARCHIVE_FILE: &str = "cache.bin";
 
 /// A directory filled under a temporary name and renamed to its final name by
 /// [`StagingDir::commit`]; dropped uncommitted, it is removed.
+///
+/// The staging directory of output `OUT` is `.OUT.partial-PID` beside it, locked (`flock`)
+/// by its bake for as long as that runs. A bake killed outright (SIGKILL, power loss) cannot
+/// remove it, so every bake first removes the staging directories of earlier bakes of the
+/// same output whose lock it can take: the kernel drops a lock when its process ends, so a
+/// free lock means the bake is gone, whatever has since become of its PID, and a bake still
+/// running is never touched.
 pub struct StagingDir {
     staging: PathBuf,
+    /// Where the output already there is moved while the new one takes its place.
+    old: PathBuf,
     target: PathBuf,
+    /// The staging directory opened and locked (`None` where directories cannot be opened).
+    _lock: Option<File>,
     committed: bool,
 }
 
 impl StagingDir {
     /// Prepares to write `target`. It may not exist yet, or be empty, or hold an earlier
     /// bake (a `report.json` or `cache.bin`); anything else is refused rather than
-    /// overwritten.
+    /// overwritten. Staging directories of earlier bakes of `target` that were killed are
+    /// removed first.
     pub fn create(target: &Path) -> Result<Self> {
+        let name = target
+            .file_name()
+            .with_context(|| format!("'{}' is not a directory path", Untrusted::path(target)))?;
+        let parent = match target.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let mut prefix = OsString::from(".");
+        prefix.push(name);
+        prefix.push(".partial-");
+        // Before looking at `target`: a bake killed while committing may have left the
+        // earlier output moved aside, and this puts it back.
+        remove_stale(&parent, &prefix, target);
         if target.exists() {
             if !target.is_dir() {
                 bail!(
                     "output '{}' exists and is not a directory",
-                    target.display()
+                    Untrusted::path(target)
                 );
             }
             let earlier_bake =
                 target.join("report.json").exists() || target.join(ARCHIVE_FILE).exists();
             let empty = std::fs::read_dir(target)
-                .with_context(|| format!("cannot read '{}'", target.display()))?
+                .with_context(|| format!("cannot read '{}'", Untrusted::path(target)))?
                 .next()
                 .is_none();
             if !earlier_bake && !empty {
                 bail!(
                     "output directory '{}' exists and does not hold a surfcache bake; refusing to overwrite it",
-                    target.display()
+                    Untrusted::path(target)
                 );
             }
         }
-        let name = target
-            .file_name()
-            .with_context(|| format!("'{}' is not a directory path", target.display()))?
-            .to_string_lossy()
-            .into_owned();
-        let parent = match target.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
         std::fs::create_dir_all(&parent)
-            .with_context(|| format!("cannot create '{}'", parent.display()))?;
-        let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
-        if staging.exists() {
-            let _ = std::fs::remove_dir_all(&staging);
-        }
-        std::fs::create_dir_all(staging.join("lightmaps"))
-            .with_context(|| format!("cannot create '{}'", staging.display()))?;
+            .with_context(|| format!("cannot create '{}'", Untrusted::path(&parent)))?;
+        let staging = parent.join(staging_name(&prefix, std::process::id(), false));
+        let old = parent.join(staging_name(&prefix, std::process::id(), true));
+        let lock = create_locked(&staging)?;
+        std::fs::create_dir(staging.join("lightmaps"))
+            .with_context(|| format!("cannot create '{}'", Untrusted::path(&staging)))?;
         Ok(Self {
             staging,
+            old,
             target: target.to_path_buf(),
+            _lock: lock,
             committed: false,
         })
     }
@@ -87,18 +107,22 @@ impl StagingDir {
         )?)
     }
 
-    /// Moves the finished directory into place (an earlier bake there is replaced).
+    /// Moves the finished directory into place (an earlier bake there is replaced: moved
+    /// aside to `.OUT.partial-PID.old`, which a later bake puts back should this one be
+    /// killed before the new directory is in place).
     pub fn commit(mut self) -> Result<()> {
         if self.target.exists() {
-            let old = self.staging.with_extension("old");
-            std::fs::rename(&self.target, &old)
-                .with_context(|| format!("cannot replace '{}'", self.target.display()))?;
-            std::fs::rename(&self.staging, &self.target)
-                .with_context(|| format!("cannot write '{}'", self.target.display()))?;
-            let _ = std::fs::remove_dir_all(&old);
+            std::fs::rename(&self.target, &self.old)
+                .with_context(|| format!("cannot replace '{}'", Untrusted::path(&self.target)))?;
+            if let Err(e) = std::fs::rename(&self.staging, &self.target) {
+                let _ = std::fs::rename(&self.old, &self.target);
+                return Err(e)
+                    .with_context(|| format!("cannot write '{}'", Untrusted::path(&self.target)));
+            }
+            let _ = std::fs::remove_dir_all(&self.old);
         } else {
             std::fs::rename(&self.staging, &self.target)
-                .with_context(|| format!("cannot write '{}'", self.target.display()))?;
+                .with_context(|| format!("cannot write '{}'", Untrusted::path(&self.target)))?;
         }
         self.committed = true;
         Ok(())
@@ -109,6 +133,112 @@ impl Drop for StagingDir {
     fn drop(&mut self) {
         if !self.committed {
             let _ = std::fs::remove_dir_all(&self.staging);
+        }
+    }
+}
+
+/// `PREFIX` + `PID`, and `.old` after it for the earlier output moved aside.
+fn staging_name(prefix: &OsStr, pid: u32, old: bool) -> OsString {
+    let mut name = prefix.to_os_string();
+    name.push(pid.to_string());
+    if old {
+        name.push(".old");
+    }
+    name
+}
+
+/// The PID of a staging name `PREFIX` + digits (+ `.old` when `old`).
+fn staging_pid(name: &OsStr, prefix: &OsStr, old: bool) -> Option<u32> {
+    let rest = name
+        .as_encoded_bytes()
+        .strip_prefix(prefix.as_encoded_bytes())?;
+    let digits = if old {
+        rest.strip_suffix(b".old")?
+    } else {
+        rest
+    };
+    if digits.is_empty() || !digits.iter().all(u8::is_ascii_digit) {
+        return None;
+    }
+    std::str::from_utf8(digits).ok()?.parse().ok()
+}
+
+/// Whether `file` (opened from `path`) is still what `path` names.
+fn still_at(file: &File, path: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (file.metadata(), std::fs::symlink_metadata(path)) {
+            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = file;
+        path.exists()
+    }
+}
+
+/// The staging directory `path` of a bake whose lock could be taken (its bake is gone),
+/// held locked; `None` while its bake runs or when it cannot be opened.
+fn take_abandoned(path: &Path) -> Option<File> {
+    let dir = File::open(path).ok()?;
+    dir.try_lock().ok()?;
+    still_at(&dir, path).then_some(dir)
+}
+
+/// Creates the directory `path` and locks it. A clean-up by another bake that took the lock
+/// between the two removes the directory before letting go of it; then it is made again.
+fn create_locked(path: &Path) -> Result<Option<File>> {
+    loop {
+        std::fs::create_dir(path)
+            .with_context(|| format!("cannot create '{}'", Untrusted::path(path)))?;
+        let Ok(dir) = File::open(path) else {
+            return Ok(None);
+        };
+        dir.lock()
+            .with_context(|| format!("cannot lock '{}'", Untrusted::path(path)))?;
+        if still_at(&dir, path) {
+            return Ok(Some(dir));
+        }
+    }
+}
+
+/// Removes, in `parent`, the staging directories `PREFIX<pid>` of bakes that are gone, and
+/// deals with the earlier outputs `PREFIX<pid>.old` they had moved aside: put back when
+/// `target` is missing (the bake was killed between the two renames of its commit), else
+/// removed. Nothing of a bake still running is touched; what cannot be removed is left.
+fn remove_stale(parent: &Path, prefix: &OsStr, target: &Path) {
+    let Ok(entries) = std::fs::read_dir(parent) else {
+        return;
+    };
+    let mut olds = Vec::new();
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        if let Some(pid) = staging_pid(&name, prefix, true) {
+            olds.push(pid);
+        } else if staging_pid(&name, prefix, false).is_some() {
+            let path = entry.path();
+            if let Some(_lock) = take_abandoned(&path) {
+                let _ = std::fs::remove_dir_all(&path);
+            }
+        }
+    }
+    for pid in olds {
+        // The bake that moved it aside is still committing while its staging directory
+        // stands locked.
+        let staging = parent.join(staging_name(prefix, pid, false));
+        let _lock = match take_abandoned(&staging) {
+            Some(lock) => Some(lock),
+            None if staging.exists() => continue,
+            None => None,
+        };
+        let old = parent.join(staging_name(prefix, pid, true));
+        if !target.exists() && std::fs::rename(&old, target).is_ok() {
+            let _ = std::fs::remove_dir_all(&staging);
+        } else {
+            let _ = std::fs::remove_dir_all(&old);
         }
     }
 }
@@ -199,9 +329,9 @@ pub fn read_archive(out_dir: &Path) -> Result<BakeArchive<Cache>> {
     let bytes = std::fs::read(&path).with_context(|| {
         format!(
             "cannot read '{}': '{}' is not a finished surfcache bake",
-            path.display(),
-            out_dir.display()
+            Untrusted::path(&path),
+            Untrusted::path(out_dir)
         )
     })?;
-    BakeArchive::from_bytes(&bytes).with_context(|| format!("'{}'", path.display()))
+    BakeArchive::from_bytes(&bytes).with_context(|| format!("'{}'", Untrusted::path(&path)))
 }

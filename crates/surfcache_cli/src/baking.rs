@@ -1,5 +1,6 @@
 //! The one bake code path of the command-line tool: options into [`BakeSettings`], and
-//! the ECS plugin's schedule run until it publishes the bake, with a progress line.
+//! the ECS plugin's schedule run until it publishes the bake, with a progress line (a bar
+//! on a terminal, plain lines in a log).
 //! `bake` and `chart` both use it.
 
 use anyhow::{Context, Result, bail};
@@ -100,6 +101,90 @@ impl BakeOptions {
     }
 }
 
+/// Set to a number of seconds, the interval between progress lines when stderr is not a
+/// terminal (default [`PROGRESS_SECONDS`]; `0` prints one every frame).
+pub const PROGRESS_SECONDS_ENV: &str = "SURFCACHE_PROGRESS_SECONDS";
+
+/// Seconds between progress lines when stderr is not a terminal.
+pub const PROGRESS_SECONDS: f64 = 10.0;
+
+/// How a bake shows its progress on stderr: a redrawn line on a terminal; elsewhere (a log,
+/// a pipe) a plain line every [`PROGRESS_SECONDS`], which a log keeps as it is.
+enum Progress {
+    Bar(ProgressBar),
+    Lines { every: Duration, next: Instant },
+}
+
+impl Progress {
+    fn new() -> Self {
+        use std::io::IsTerminal;
+        if std::io::stderr().is_terminal() {
+            return Progress::Bar(
+                ProgressBar::new_spinner().with_style(
+                    ProgressStyle::with_template("bake {spinner} {msg} [{elapsed_precise}]")
+                        .expect("static template"),
+                ),
+            );
+        }
+        let seconds = std::env::var(PROGRESS_SECONDS_ENV)
+            .ok()
+            .and_then(|s| s.trim().parse::<f64>().ok())
+            .filter(|s| s.is_finite() && *s >= 0.0)
+            .unwrap_or(PROGRESS_SECONDS);
+        let every = Duration::from_secs_f64(seconds);
+        Progress::Lines {
+            every,
+            next: Instant::now() + every,
+        }
+    }
+
+    /// Shows `status`, `elapsed` after the bake began (a line is printed only when its
+    /// interval has passed). `elapsed` is the wall clock, since `status` is only refreshed
+    /// when a step of the job returns.
+    fn show(&mut self, status: &BakeStatus, elapsed: Duration) {
+        let p = &status.job;
+        let eta = status
+            .eta_seconds
+            .map(|s| format!(", about {s:.0} s left"))
+            .unwrap_or_default();
+        match self {
+            Progress::Bar(bar) => {
+                bar.set_message(format!(
+                    "pass {}/{} round {}: {} points done, {} pending, {:.1} Mrays/s{eta}",
+                    p.pass + 1,
+                    p.passes.max(1),
+                    p.current.rounds + 1,
+                    p.current.points_done,
+                    p.current.points_pending,
+                    status.rays_per_second / 1e6,
+                ));
+                bar.tick();
+            }
+            Progress::Lines { every, next } => {
+                let now = Instant::now();
+                if now < *next {
+                    return;
+                }
+                *next = now + *every;
+                eprintln!(
+                    "bake: pass {}/{}, {:.1} % done, {:.1} Mrays/s{eta} ({:.0} s so far)",
+                    p.pass + 1,
+                    p.passes.max(1),
+                    100.0 * status.fraction,
+                    status.rays_per_second / 1e6,
+                    elapsed.as_secs_f64(),
+                );
+            }
+        }
+    }
+
+    fn finish(self) {
+        if let Progress::Bar(bar) = self {
+            bar.finish_and_clear();
+        }
+    }
+}
+
 /// A finished bake: the final cache, the job's figures, the settings it used (floor
 /// filled in) and its wall-clock time.
 pub struct Baked {
@@ -130,38 +215,21 @@ pub fn bake(
         points_per_step: 1024,
         ..Default::default()
     });
-    let bar = ProgressBar::new_spinner().with_style(
-        ProgressStyle::with_template("bake {spinner} {msg} [{elapsed_precise}]")
-            .expect("static template"),
-    );
+    let mut progress = Progress::new();
     let result = SurfcachePlugin::run_until_baked(
         &mut loaded.world,
         &mut loaded.schedule,
         Duration::from_millis(10),
         |world| {
             let status = world.resource::<BakeStatus>();
-            let p = status.job;
-            if stop(start.elapsed(), &p) {
+            if stop(start.elapsed(), &status.job) {
                 return false;
             }
-            bar.set_message(format!(
-                "pass {}/{} round {}: {} points done, {} pending, {:.1} Mrays/s{}",
-                p.pass + 1,
-                p.passes.max(1),
-                p.current.rounds + 1,
-                p.current.points_done,
-                p.current.points_pending,
-                status.rays_per_second / 1e6,
-                status
-                    .eta_seconds
-                    .map(|s| format!(", about {s:.0} s left"))
-                    .unwrap_or_default()
-            ));
-            bar.tick();
+            progress.show(status, start.elapsed());
             true
         },
     );
-    bar.finish_and_clear();
+    progress.finish();
     match result {
         Err(BakeWaitError::Stopped) => Ok(None),
         Err(BakeWaitError::Failed(e)) => bail!("bake failed: {e}"),

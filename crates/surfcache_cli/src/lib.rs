@@ -3,7 +3,9 @@
 //!
 //! Every command is a thin app: it loads a scene into a `bevy_ecs` world, runs the
 //! surfcache schedule (scene sync → BVH → …) and reads the results from its resources.
-//! Errors print as one line on stderr with a non-zero exit status.
+//! Errors print as one line on stderr with a non-zero exit status, and warnings as one line
+//! each, both through [`surfcache_io::Untrusted`] so that no byte of an input file reaches
+//! the terminal raw.
 
 mod bake_dir;
 mod baking;
@@ -20,6 +22,7 @@ pub use commands::{
 
 use clap::Parser;
 use std::process::ExitCode;
+use surfcache_io::Untrusted;
 
 const ABOUT: &str = "Bakes diffuse global illumination into surface caches.
 
@@ -53,9 +56,13 @@ pub fn main() -> ExitCode {
     match commands::run(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            let message = format!("{e:#}").replace('\n', " ");
-            eprintln!("error: {message}");
+            eprintln!("error: {}", Untrusted::text(&format!("{e:#}")));
             ExitCode::FAILURE
         }
     }
+}
+
+/// Prints `warning: MESSAGE` on stderr as one printable line (the message may quote a file).
+pub(crate) fn warn(message: &str) {
+    eprintln!("warning: {}", Untrusted::text(message));
 }

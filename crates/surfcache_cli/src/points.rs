@@ -5,6 +5,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use std::{io::Write, path::Path};
 use surfcache_cache::SurfaceCache;
+use surfcache_io::Untrusted;
 use surfcache_trace::{Query, TracedScene};
 
 /// Baked irradiance at each query point: the point is located on `geometry` (the baked
@@ -29,14 +30,15 @@ pub fn lookup_points<C: SurfaceCache>(
 /// Reads `x,y,z,nx,ny,nz` rows; rejects a wrong header, short rows and non-finite numbers.
 pub fn read_points(path: &Path) -> Result<Vec<Query>> {
     let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read points file '{}'", path.display()))?;
+        .with_context(|| format!("cannot read points file '{}'", Untrusted::path(path)))?;
     let mut lines = text.lines().enumerate();
     let header = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
     let columns: Vec<&str> = header.split(',').map(str::trim).collect();
     if columns != ["x", "y", "z", "nx", "ny", "nz"] {
         bail!(
-            "points file '{}': header must be 'x,y,z,nx,ny,nz', found '{header}'",
-            path.display()
+            "points file '{}': header must be 'x,y,z,nx,ny,nz', found '{}'",
+            Untrusted::path(path),
+            Untrusted::name(header)
         );
     }
     let mut queries = Vec::new();
@@ -48,11 +50,17 @@ pub fn read_points(path: &Path) -> Result<Vec<Query>> {
             .split(',')
             .map(|v| v.trim().parse::<f32>())
             .collect::<Result<_, _>>()
-            .map_err(|e| anyhow::anyhow!("points file '{}' line {}: {e}", path.display(), i + 1))?;
+            .map_err(|e| {
+                anyhow::anyhow!(
+                    "points file '{}' line {}: {e}",
+                    Untrusted::path(path),
+                    i + 1
+                )
+            })?;
         if values.len() != 6 {
             bail!(
                 "points file '{}' line {}: expected 6 values, found {}",
-                path.display(),
+                Untrusted::path(path),
                 i + 1,
                 values.len()
             );
@@ -60,7 +68,7 @@ pub fn read_points(path: &Path) -> Result<Vec<Query>> {
         if values.iter().any(|v| !v.is_finite()) {
             bail!(
                 "points file '{}' line {}: non-finite value",
-                path.display(),
+                Untrusted::path(path),
                 i + 1
             );
         }
@@ -68,7 +76,7 @@ pub fn read_points(path: &Path) -> Result<Vec<Query>> {
         if normal.length_squared() == 0.0 {
             bail!(
                 "points file '{}' line {}: zero normal",
-                path.display(),
+                Untrusted::path(path),
                 i + 1
             );
         }
@@ -109,15 +117,16 @@ pub struct ResultRow {
 /// Reads a result CSV with header `x,y,z,r,g,b` or `x,y,z,r,g,b,rel_std`.
 pub fn read_results(path: &Path) -> Result<Vec<ResultRow>> {
     let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read results file '{}'", path.display()))?;
+        .with_context(|| format!("cannot read results file '{}'", Untrusted::path(path)))?;
     let mut lines = text.lines().enumerate();
     let header = lines.next().map(|(_, l)| l.trim()).unwrap_or("");
     let with_std = match header {
         "x,y,z,r,g,b" => false,
         "x,y,z,r,g,b,rel_std" => true,
         _ => bail!(
-            "results file '{}': header must be 'x,y,z,r,g,b[,rel_std]', found '{header}'",
-            path.display()
+            "results file '{}': header must be 'x,y,z,r,g,b[,rel_std]', found '{}'",
+            Untrusted::path(path),
+            Untrusted::name(header)
         ),
     };
     let mut rows = Vec::new();
@@ -130,12 +139,16 @@ pub fn read_results(path: &Path) -> Result<Vec<ResultRow>> {
             .map(|v| v.trim().parse::<f32>())
             .collect::<Result<_, _>>()
             .map_err(|e| {
-                anyhow::anyhow!("results file '{}' line {}: {e}", path.display(), i + 1)
+                anyhow::anyhow!(
+                    "results file '{}' line {}: {e}",
+                    Untrusted::path(path),
+                    i + 1
+                )
             })?;
         if v.len() != 6 + with_std as usize {
             bail!(
                 "results file '{}' line {}: wrong number of values",
-                path.display(),
+                Untrusted::path(path),
                 i + 1
             );
         }

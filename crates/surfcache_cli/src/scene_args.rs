@@ -61,7 +61,7 @@ impl EnvArgs {
         if let Some(path) = &self.env {
             let (map, warnings) = surfcache_io::read_environment_map(path)?;
             for w in warnings {
-                eprintln!("warning: {w}");
+                crate::warn(&w);
             }
             scene.environment = Environment::from_map(Arc::new(map));
         } else if let Some(color) = self.env_color {
@@ -91,19 +91,19 @@ impl LoadedWorld {
         let loaded = surfcache_io::load_scene(scene_arg)?;
         let report = &loaded.report;
         if report.skipped_primitives > 0 {
-            eprintln!(
-                "warning: skipped {} primitive(s) that are not triangles (points or lines)",
+            crate::warn(&format!(
+                "skipped {} primitive(s) that are not triangles (points or lines)",
                 report.skipped_primitives
-            );
+            ));
         }
         if report.degenerate_triangles > 0 {
-            eprintln!(
-                "warning: dropped {} degenerate or zero-area triangle(s)",
+            crate::warn(&format!(
+                "dropped {} degenerate or zero-area triangle(s)",
                 report.degenerate_triangles
-            );
+            ));
         }
         for w in &report.warnings {
-            eprintln!("warning: {w}");
+            crate::warn(w);
         }
         let mut scene = loaded.scene;
         env.apply(&mut scene)?;

@@ -1,7 +1,7 @@
 //! Linear-RGB OpenEXR images: equirectangular environment maps and lightmap textures.
 
 use crate::IoError;
-use crate::error::no_panic;
+use crate::error::{Untrusted, no_panic};
 use crate::file_replace::replace_with;
 use exr::prelude::{
     AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, ReadChannels, ReadLayers,
@@ -32,7 +32,7 @@ pub fn read_environment_map(path: &Path) -> Result<(EnvironmentMap, Vec<String>)
     if negative > 0 {
         warnings.push(format!(
             "EXR '{}': {negative} pixels had negative values, clamped to 0",
-            path.display()
+            Untrusted::path(path)
         ));
     }
     Ok((
@@ -147,7 +147,16 @@ fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> 
     let layer: &Layer<AnyChannels<FlatSamples>> = &image.layer_data;
     let channels = &layer.channel_data.list;
     let Some(rgb) = find_rgb(channels) else {
-        let found: Vec<String> = channels.iter().map(|c| c.name.to_string()).collect();
+        // At most LISTED names, so that a file of many channels still gives a short line.
+        const LISTED: usize = 8;
+        let mut found: Vec<String> = channels
+            .iter()
+            .take(LISTED)
+            .map(|c| Untrusted::bytes(c.name.bytes()).to_string())
+            .collect();
+        if channels.len() > LISTED {
+            found.push(format!("… ({} channels)", channels.len()));
+        }
         return Err(IoError::MissingChannels {
             path: path.to_path_buf(),
             found: if found.is_empty() {
@@ -165,7 +174,7 @@ fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> 
                 path,
                 format!(
                     "channel {} is subsampled ({} samples for {dw}×{dh} pixels), which is not supported",
-                    c.name,
+                    Untrusted::bytes(c.name.bytes()),
                     c.sample_data.len()
                 ),
             ));
@@ -189,7 +198,7 @@ fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> 
     if ox != 0 || oy != 0 || dw != width || dh != height {
         warnings.push(format!(
             "EXR '{}': data window {dw}×{dh} at ({ox}, {oy}) differs from the {width}×{height} display window; pixels outside it are black",
-            path.display()
+            Untrusted::path(path)
         ));
     }
     let mut texels = vec![Vec3::ZERO; width * height];

@@ -6,7 +6,7 @@
 //! textures are decoded from sRGB to linear once per image and only when a material in the
 //! scene uses them. `KHR_lights_punctual` lights become world-space [`Light`]s.
 
-use crate::error::{IoError, no_panic};
+use crate::error::{IoError, Untrusted, no_panic};
 use crate::gltf_accessor::{self, Buffers};
 use crate::uri::{UriTarget, resolve};
 use gltf::accessor::DataType;
@@ -62,7 +62,10 @@ pub fn load_gltf(path: &Path) -> Result<LoadedScene, IoError> {
         if !SUPPORTED_REQUIRED.contains(&ext) {
             return Err(IoError::gltf(
                 path,
-                format!("requires the unsupported extension {ext}"),
+                format!(
+                    "requires the unsupported extension {}",
+                    Untrusted::name(ext)
+                ),
             ));
         }
     }
@@ -203,7 +206,9 @@ pub fn load_gltf(path: &Path) -> Result<LoadedScene, IoError> {
             ),
         ));
     }
-    scene.validate().map_err(|e| IoError::gltf(path, e))?;
+    scene
+        .validate()
+        .map_err(|e| IoError::gltf(path, scene_error(e)))?;
     // Finite positions under finite transforms can still overflow in world space.
     for inst in &scene.instances {
         if let Some(v) = inst
@@ -216,7 +221,8 @@ pub fn load_gltf(path: &Path) -> Result<LoadedScene, IoError> {
                 path,
                 format!(
                     "instance '{}': vertex {v} of mesh '{}' lies at a non-finite world position (the node transforms overflow)",
-                    inst.name, inst.mesh.name
+                    Untrusted::name(&inst.name),
+                    Untrusted::name(&inst.mesh.name)
                 ),
             ));
         }
@@ -348,7 +354,10 @@ fn load_buffers(
                     } else {
                         e.to_string()
                     };
-                    IoError::gltf(path, format!("buffer {i} file '{uri}' {cause}"))
+                    IoError::gltf(
+                        path,
+                        format!("buffer {i} file '{}' {cause}", Untrusted::name(uri)),
+                    )
                 })?,
                 Err(e) => return Err(IoError::gltf(path, format!("buffer {i}: {e}"))),
             },
@@ -458,6 +467,8 @@ fn decode_primitive(
     } else {
         mesh_name
     };
+    // What messages show of the name (the mesh keeps it as the file has it).
+    let shown = Untrusted::name(&name).to_string();
     let mut out = DecodedPrimitive {
         mesh: None,
         material: prim.material().index(),
@@ -473,7 +484,7 @@ fn decode_primitive(
         out.skipped = true;
         return Ok(out);
     }
-    let what = |attr: &str| format!("mesh '{name}' {attr}");
+    let what = |attr: &str| format!("mesh '{shown}' {attr}");
     let positions = match prim.get(&Semantic::Positions) {
         Some(acc) => vec3s(gltf_accessor::read_f32(
             &acc,
@@ -485,7 +496,7 @@ fn decode_primitive(
         None => {
             out.skipped = true;
             out.warnings
-                .push(format!("mesh '{name}' has no POSITION; skipped"));
+                .push(format!("mesh '{shown}' has no POSITION; skipped"));
             return Ok(out);
         }
     };
@@ -537,7 +548,7 @@ fn decode_primitive(
         _ => {
             if !corners.len().is_multiple_of(3) {
                 out.warnings.push(format!(
-                    "mesh '{name}' has {} indices, not a multiple of 3; the last {} ignored",
+                    "mesh '{shown}' has {} indices, not a multiple of 3; the last {} ignored",
                     corners.len(),
                     corners.len() % 3
                 ));
@@ -557,7 +568,7 @@ fn decode_primitive(
         uv1,
         indices,
     };
-    m.validate().map_err(|e| e.to_string())?;
+    m.validate().map_err(scene_error)?;
     if has_normals {
         let mut fixed = 0;
         let mut computed: Option<Vec<Vec3>> = None;
@@ -577,7 +588,7 @@ fn decode_primitive(
         }
         if fixed > 0 {
             out.warnings.push(format!(
-                "mesh '{name}': {fixed} zero-length or overflowing normals replaced by computed ones"
+                "mesh '{shown}': {fixed} zero-length or overflowing normals replaced by computed ones"
             ));
         }
     } else {
@@ -603,6 +614,7 @@ fn convert_material(
         .name()
         .map(str::to_string)
         .unwrap_or_else(|| format!("material{}", m.index().unwrap_or(0)));
+    let shown = Untrusted::name(&name);
     let pbr = m.pbr_metallic_roughness();
     let base = Vec4::from_array(pbr.base_color_factor());
     let metallic = pbr.metallic_factor();
@@ -617,7 +629,7 @@ fn convert_material(
         ("alphaCutoff", cutoff.is_finite()),
     ] {
         if !finite {
-            return Err(format!("material '{name}': {what} is not finite"));
+            return Err(format!("material '{shown}': {what} is not finite"));
         }
     }
     let metallic = metallic.clamp(0.0, 1.0);
@@ -625,7 +637,7 @@ fn convert_material(
         let info = info?;
         if info.tex_coord() != 0 {
             warnings.push(format!(
-                "material '{name}': {slot} uses TEXCOORD_{}; read with TEXCOORD_0",
+                "material '{shown}': {slot} uses TEXCOORD_{}; read with TEXCOORD_0",
                 info.tex_coord()
             ));
         }
@@ -686,17 +698,20 @@ fn decode_image(
     }
     let label = match image.source() {
         gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
-            format!("image {index} ('{uri}')")
+            format!("image {index} ('{}')", Untrusted::name(uri))
         }
         _ => match image.name() {
-            Some(n) => format!("image {index} ('{n}')"),
+            Some(n) => format!("image {index} ('{}')", Untrusted::name(n)),
             None => format!("image {index}"),
         },
     };
     match image.source() {
         gltf::image::Source::Uri { uri, .. } => match resolve(uri, base) {
             Ok(UriTarget::File(file)) if !file.is_file() => {
-                return Err(format!("{label}: file '{uri}' not found"));
+                return Err(format!(
+                    "{label}: file '{}' not found",
+                    Untrusted::name(uri)
+                ));
             }
             Ok(_) => {}
             Err(e) => return Err(format!("{label}: {e}")),
@@ -837,6 +852,22 @@ fn convert_light(def: &json_lights::Light, world: &Affine3A) -> Result<Light, St
         }
         Checked::Invalid => Err("unknown light type; ignored".into()),
     }
+}
+
+/// A [`SceneError`](surfcache_core::SceneError) as a cause, the mesh or instance name it
+/// quotes through [`Untrusted::name`].
+fn scene_error(mut e: surfcache_core::SceneError) -> String {
+    use surfcache_core::SceneError as E;
+    match &mut e {
+        E::NonFinitePosition { mesh: name, .. }
+        | E::NonFiniteNormal { mesh: name, .. }
+        | E::NonFiniteTexcoord { mesh: name, .. }
+        | E::IndexOutOfRange { mesh: name, .. }
+        | E::AttributeLength { mesh: name, .. }
+        | E::BadTransform { instance: name } => *name = Untrusted::name(name).to_string(),
+        E::Empty => {}
+    }
+    e.to_string()
 }
 
 /// `name`, or `name~2`, `name~3`, … whichever is not taken yet.

@@ -11,8 +11,11 @@
 //! - [`write_file_atomically`] is the one way surfcache writes an output file: through a
 //!   temporary sibling renamed into place.
 //!
-//! Every function returns an [`IoError`] whose message is one line naming the file and the
-//! cause; no input, however malformed, makes these functions panic.
+//! Every function returns an [`IoError`] whose message is one printable line naming the file
+//! and the cause; no input, however malformed, makes these functions panic. Text a message
+//! quotes from a file (names, URIs, excerpts) or from the command line goes through
+//! [`Untrusted`], which escapes what is not printable and cuts what is long; the
+//! command-line tool prints every message through it too.
 
 mod error;
 mod exr_image;
@@ -22,7 +25,7 @@ mod gltf_export;
 mod gltf_import;
 mod uri;
 
-pub use error::IoError;
+pub use error::{IoError, Untrusted};
 pub use exr_image::{read_environment_map, read_rgb_exr, write_rgb_exr};
 pub use file_replace::write_file_atomically;
 pub use gltf_export::{LightmapRef, write_gltf};

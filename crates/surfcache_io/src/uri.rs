@@ -1,5 +1,6 @@
 //! Resolving the URIs of glTF buffers and images to files.
 
+use crate::error::Untrusted;
 use std::path::{Path, PathBuf};
 
 /// Where a glTF URI points.
@@ -24,7 +25,10 @@ pub(crate) fn resolve(uri: &str, base: &Path) -> Result<UriTarget, String> {
     if let Some((scheme, _)) = uri.split_once(':')
         && !scheme.contains('/')
     {
-        return Err(format!("unsupported URI scheme '{scheme}:'"));
+        return Err(format!(
+            "unsupported URI scheme '{}:'",
+            Untrusted::name(scheme)
+        ));
     }
     Ok(UriTarget::File(base.join(percent_decode(uri)?)))
 }
@@ -40,7 +44,7 @@ fn percent_decode(s: &str) -> Result<String, String> {
             let hex = s
                 .get(i + 1..i + 3)
                 .and_then(|h| u8::from_str_radix(h, 16).ok())
-                .ok_or_else(|| format!("URI '{s}' has a bad %-escape"))?;
+                .ok_or_else(|| format!("URI '{}' has a bad %-escape", Untrusted::name(s)))?;
             out.push(hex);
             i += 3;
         } else {
@@ -48,7 +52,8 @@ fn percent_decode(s: &str) -> Result<String, String> {
             i += 1;
         }
     }
-    String::from_utf8(out).map_err(|_| format!("URI '{s}' does not decode to UTF-8"))
+    String::from_utf8(out)
+        .map_err(|_| format!("URI '{}' does not decode to UTF-8", Untrusted::name(s)))
 }
 
 #[cfg(test)]

@@ -20,6 +20,7 @@ use surfcache_cache::{
     archive::BakeArchive,
     bake::{DEFAULT_GATHER_PASSES, FLOOR_FRACTION},
 };
+use surfcache_io::Untrusted;
 
 /// `surfcache bake` options (CONTRACT.md, plus the project's own).
 #[derive(clap::Args)]
@@ -132,7 +133,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
     else {
         bail!(
             "interrupted: nothing was written to '{}'",
-            args.out.display()
+            Untrusted::path(&args.out)
         );
     };
     let floor = settings.estimator.floor;
@@ -193,7 +194,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         bake_seconds,
         stats.sample_points,
         stats.cache_bytes,
-        args.out.display()
+        Untrusted::path(&args.out)
     );
     Ok(())
 }

@@ -7,6 +7,7 @@ use crate::{
 };
 use anyhow::{Context, Result};
 use std::path::PathBuf;
+use surfcache_io::Untrusted;
 
 /// `surfcache query` options (CONTRACT.md).
 #[derive(clap::Args)]
@@ -26,7 +27,7 @@ pub fn run(args: QueryArgs) -> Result<()> {
     let archive = read_archive(&args.out_dir)?;
     let geometry = archive
         .geometry()
-        .with_context(|| format!("'{}'", args.out_dir.display()))?;
+        .with_context(|| format!("'{}'", Untrusted::path(&args.out_dir)))?;
     let values = lookup_points(&geometry, &archive.cache, &queries);
     let mut off_surface = 0;
     let rows: Vec<String> = queries
@@ -44,9 +45,9 @@ pub fn run(args: QueryArgs) -> Result<()> {
         })
         .collect();
     if off_surface > 0 {
-        eprintln!(
-            "warning: {off_surface} point(s) lie farther than 1e-4 of the scene diagonal from every surface: nan"
-        );
+        crate::warn(&format!(
+            "{off_surface} point(s) lie farther than 1e-4 of the scene diagonal from every surface: nan"
+        ));
     }
     write_results(args.output.as_deref(), "x,y,z,r,g,b", &rows)
 }

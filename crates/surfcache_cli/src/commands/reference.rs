@@ -91,9 +91,9 @@ pub fn run(args: ReferenceArgs) -> Result<()> {
         })
         .collect();
     if off_surface > 0 {
-        eprintln!(
-            "warning: {off_surface} point(s) lie farther than 1e-4 of the scene diagonal from every surface: nan"
-        );
+        crate::warn(&format!(
+            "{off_surface} point(s) lie farther than 1e-4 of the scene diagonal from every surface: nan"
+        ));
     }
     write_results(args.output.as_deref(), "x,y,z,r,g,b,rel_std", &rows)
 }

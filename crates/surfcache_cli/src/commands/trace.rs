@@ -5,6 +5,7 @@ use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::{path::PathBuf, time::Instant};
+use surfcache_io::Untrusted;
 
 #[derive(clap::Args)]
 pub struct TraceArgs {
@@ -28,11 +29,11 @@ const CHUNK: usize = 4096;
 
 pub fn run(args: TraceArgs) -> Result<()> {
     let bytes = std::fs::read(&args.rays)
-        .with_context(|| format!("cannot read rays file '{}'", args.rays.display()))?;
+        .with_context(|| format!("cannot read rays file '{}'", Untrusted::path(&args.rays)))?;
     if bytes.len() % 32 != 0 {
         bail!(
             "rays file '{}' has {} bytes, not a multiple of 32 (8 f32 per ray)",
-            args.rays.display(),
+            Untrusted::path(&args.rays),
             bytes.len()
         );
     }
