@@ -283,7 +283,7 @@ fn alpha_filters_skip_rejected_hits_at_every_level() {
     let mut bvh = Bvh::build(&tris);
     let accept = |t: u32, uv: surfcache::core::glam::Vec2| {
         assert!(uv.x >= 0.0 && uv.y >= 0.0 && uv.x + uv.y <= 1.0 + 1e-6);
-        t % 2 == 0
+        t.is_multiple_of(2)
     };
     let mut rng = Rng::new(10, 0);
     let rays: Vec<(Vec3, Vec3)> = (0..1500)
