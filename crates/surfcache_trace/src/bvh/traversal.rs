@@ -228,14 +228,9 @@ impl Kernel for Scalar {
 /// `[tmin, tmax]`.
 #[inline(always)]
 pub fn triangle_lane(block: &TriangleBlock, l: usize, ray: &TraversalRay) -> Option<f32> {
-    let (s, d, o) = (&block, ray.direction, ray.origin);
-    let v0 = [s.v0[0][l], s.v0[1][l], s.v0[2][l]];
-    let e1 = [s.e1[0][l], s.e1[1][l], s.e1[2][l]];
-    let e2 = [s.e2[0][l], s.e2[1][l], s.e2[2][l]];
-    let c = [v0[0] - o[0], v0[1] - o[1], v0[2] - o[2]];
-    let r = cross(d, c);
+    let (e1, e2, c, r) = lane_terms(block, l, ray);
     let ng = cross(e1, e2);
-    let det = dot(ng, d);
+    let det = dot(ng, ray.direction);
     let (u, v, tt) = (dot(r, e2), dot(r, e1), dot(ng, c));
     let sign = det.to_bits() & 0x8000_0000;
     let flip = |x: f32| f32::from_bits(x.to_bits() ^ sign);
@@ -259,14 +254,24 @@ pub fn triangle_lane(block: &TriangleBlock, l: usize, ray: &TraversalRay) -> Opt
 /// Barycentrics `(u, v)` of the ray's hit on lane `l` (same operations as the test).
 #[inline]
 pub fn lane_barycentrics(block: &TriangleBlock, l: usize, ray: &TraversalRay) -> (f32, f32) {
-    let (s, d, o) = (&block, ray.direction, ray.origin);
-    let v0 = [s.v0[0][l], s.v0[1][l], s.v0[2][l]];
+    let (e1, e2, _, r) = lane_terms(block, l, ray);
+    let det = dot(cross(e1, e2), ray.direction);
+    (dot(r, e2) / det, dot(r, e1) / det)
+}
+
+/// Lane `l`'s edges `e1`, `e2`, `c = v0 − o` and `r = d × c`, shared by the hit test and
+/// the barycentrics (Möller and Trumbore 1997, in the division-free form).
+#[inline(always)]
+fn lane_terms(
+    block: &TriangleBlock,
+    l: usize,
+    ray: &TraversalRay,
+) -> ([f32; 3], [f32; 3], [f32; 3], [f32; 3]) {
+    let (s, o) = (block, ray.origin);
     let e1 = [s.e1[0][l], s.e1[1][l], s.e1[2][l]];
     let e2 = [s.e2[0][l], s.e2[1][l], s.e2[2][l]];
-    let c = [v0[0] - o[0], v0[1] - o[1], v0[2] - o[2]];
-    let r = cross(d, c);
-    let det = dot(cross(e1, e2), d);
-    (dot(r, e2) / det, dot(r, e1) / det)
+    let c = [s.v0[0][l] - o[0], s.v0[1][l] - o[1], s.v0[2][l] - o[2]];
+    (e1, e2, c, cross(ray.direction, c))
 }
 
 /// `a × b`, component order as in the SIMD kernels.
