@@ -269,7 +269,7 @@ fn leaning_wall() -> Vec<Contact> {
         base(0.5, 0.6),
         base(-0.5, 0.6),
     ]);
-    let mut points = floor_points(0.1, 1.0, &[above.clone()]);
+    let mut points = floor_points(0.1, 1.0, std::slice::from_ref(&above));
     points.extend(floor_points(0.1, -1.0, &[above]));
     vec![("leaning wall", scene, points)]
 }

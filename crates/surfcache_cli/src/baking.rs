@@ -62,10 +62,10 @@ impl BakeOptions {
             bail!("--max-rel-error must be a positive number");
         }
         let defaults = EstimatorSettings::default();
-        if let Some(n) = self.samples {
-            if n == 0 || self.min_samples.is_some() || self.max_samples.is_some() {
-                bail!("--samples takes a positive count and replaces --min-samples/--max-samples");
-            }
+        if let Some(n) = self.samples
+            && (n == 0 || self.min_samples.is_some() || self.max_samples.is_some())
+        {
+            bail!("--samples takes a positive count and replaces --min-samples/--max-samples");
         }
         let min_samples = self
             .samples
