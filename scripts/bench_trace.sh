@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Ray-tracing benchmark through `surfcache trace` (CONTRACT.md): BVH build time and
+# Ray-tracing benchmark through `surfcache trace` (docs/cli.md): BVH build time and
 # Mrays/s with 1 and 2 threads, closest hit and any hit, for incoherent rays (origins on
 # surfaces, cosine-distributed directions) and camera rays, on the built-in `cornell`, the
 # Stanford bunny and Crytek Sponza from ../shared/assets (skipped when absent).

@@ -1,4 +1,4 @@
-//! Malformed and unsupported input (issue: foundation, "bad input"; CONTRACT.md "Exit status").
+//! Malformed and unsupported input (issue: foundation, "bad input"; docs/cli.md, "Exit status").
 //!
 //! Every case runs the `surfcache` binary on a file built here from `assets/cornell.gltf`
 //! (or written by hand) and checks what a user sees: a non-zero exit status with exactly one

@@ -582,7 +582,7 @@ fn report_without_clock(dir: &Path) -> Value {
     report
 }
 
-/// CONTRACT.md "Determinism": the same scene, seed and thread count give bit-identical
+/// docs/cli.md, "Determinism": the same scene, seed and thread count give bit-identical
 /// outputs — `cache.bin`, every `lightmaps/*.exr`, `scene.gltf`, and `report.json` apart
 /// from `bake_seconds`. Another seed gives other bytes.
 #[test]
@@ -658,7 +658,7 @@ fn cornell_reference(count: usize) -> Vec<((Vec3, Vec3), Vec3)> {
         .collect()
 }
 
-/// `surfcache query` on a finished Cornell bake (CONTRACT.md): header `x,y,z,r,g,b`, one
+/// `surfcache query` on a finished Cornell bake (docs/cli.md): header `x,y,z,r,g,b`, one
 /// row per point in order, a point on the floor lit and finite, a point far from every
 /// surface `nan,nan,nan` with a warning, `-o` writing the same CSV, and values within a
 /// loose bound of the committed path-traced reference (this bake is a fast, coarse one).

@@ -1,4 +1,4 @@
-//! Environment-map orientation (CONTRACT.md): an equirectangular map written with
+//! Environment-map orientation (docs/cli.md): an equirectangular map written with
 //! `write_rgb_exr` and read back with `read_environment_map` lights the scene from the
 //! directions the contract assigns to its pixels.
 //!

@@ -1,4 +1,4 @@
-//! Failure modes, tested on purpose (DESIGN.md §7): thin walls, hard shadows between
+//! Failure modes, tested on purpose (docs/design.md, Speed against accuracy): thin walls, hard shadows between
 //! samples, dark niches, intersecting triangles, degenerate and needle triangles, a
 //! sun-sized hot spot in an HDR map, very small and very large scenes, and shading normals
 //! bent far from the geometry.
@@ -186,7 +186,7 @@ impl Points {
 /// slab). The slab's outer face receives πL + E_sun cos θ ≈ 1195 W/m²; its inner face,
 /// 1 mm away, and everything else inside the room receive exactly nothing.
 ///
-/// What fails: *vertex lighting leaks* (DESIGN.md §3.1). A vertex at the foot of the slab
+/// What fails: *vertex lighting leaks* (docs/design.md, Caches). A vertex at the foot of the slab
 /// lies on the floor, the slab and a side wall at once; its rays leave from the vertex
 /// itself, lifted only along its own normal, so those heading through the other surfaces'
 /// planes miss them (a hit at t = 0 is no hit) and reach the bright world, and barycentric
@@ -330,8 +330,8 @@ fn thin_wall_leaks_only_through_vertex_lighting() {
 // 2. Hard shadow edges between coarse samples
 // ---------------------------------------------------------------------------------------
 
-/// **Hard shadow between all coarse samples** (the thesis' misjudged triangle, DESIGN.md
-/// §3.2 "known failures"). A black 4 m × 4 m floor of two triangles under a dim sky
+/// **Hard shadow between all coarse samples** (the thesis' misjudged triangle,
+/// docs/design.md, Caches). A black 4 m × 4 m floor of two triangles under a dim sky
 /// (0.1 W/(m²·sr)) and a 3 W/m² sun straight down; a black bar 1 m above it casts a
 /// 10 cm strip of full shadow, 0.9 < x < 1.0, across the whole floor. The order-2 samples
 /// of both triangles lie at x ∈ {0, 2, 4}: all of them are lit.
@@ -628,14 +628,18 @@ fn dark_niche_black_blotches_and_how_gathering_removes_them() {
     // bright sky stays exactly black, and its all-zero runs stop once 1.84·S/n ≤ bound·ε
     // (S = ε/FLOOR_FRACTION), at the next round of 16 samples after 1.84/(bound · 1 %);
     // inside a closed outward-facing box (every first ray hits a back face: a buried
-    // point) they stop at `min_samples` as before.
+    // point, which the caches discard) they stop after the first round of
+    // BURIED_PROBE_SAMPLES, below `min_samples`.
     let sky = 1e4;
     let floor = FLOOR_FRACTION * PI * sky;
     let settings = estimator(rel, 256, 65_536, floor);
     let zero_run =
         (surfcache::trace::ZERO_RUN_EVENTS / (rel as f64 * FLOOR_FRACTION as f64)).ceil() as u32;
     let zero_run = zero_run.div_ceil(16) * 16;
-    for (inward, expected) in [(true, zero_run), (false, 256)] {
+    for (inward, expected) in [
+        (true, zero_run),
+        (false, surfcache::trace::BURIED_PROBE_SAMPLES),
+    ] {
         let boxed = traced(
             vec![Instance::new(
                 cuboid("box", Vec3::ZERO, Vec3::ONE, inward),
@@ -653,6 +657,7 @@ fn dark_niche_black_blotches_and_how_gathering_removes_them() {
         );
         assert_eq!(e.value, Vec3::ZERO);
         assert_eq!(e.samples, expected, "walls inward: {inward}");
+        assert_eq!(e.back_face_share, if inward { 0.0 } else { 1.0 });
         assert!(e.rel_error <= rel);
     }
 }
@@ -1194,7 +1199,7 @@ fn bend_normals(mut mesh: Mesh, angle: f32, tilt: impl Fn(Vec3) -> Vec3) -> Mesh
 /// the surface would shine through it, and in a closed box with such normals light
 /// would leak in through the walls.
 ///
-/// How the project copes (CONTRACT.md "Normals"): irradiance is measured about the
+/// How the project copes (docs/cli.md, "Normals and sides"): irradiance is measured about the
 /// shading normal ν, but directions under the geometric surface carry nothing, at the
 /// measured point and at every bounce, and lights below it contribute nothing. So on
 /// either side of the quad E is the sky's part of the wedge above both planes,

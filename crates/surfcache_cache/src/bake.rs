@@ -384,10 +384,14 @@ pub struct BakeSettings {
 
 impl Default for BakeSettings {
     fn default() -> Self {
+        let method = Method::default();
+        let (min_samples, max_samples) = method.default_sample_range();
         Self {
-            cache: CacheSettings::for_method(Method::default()),
+            cache: CacheSettings::for_method(method),
             estimator: EstimatorSettings {
                 floor: 0.0,
+                min_samples,
+                max_samples,
                 ..Default::default()
             },
             seed: 0,

@@ -1,4 +1,4 @@
-//! Incremental re-bakes after a scene edit (DESIGN.md §6).
+//! Incremental re-bakes after a scene edit (docs/design.md, Incremental re-baking).
 //!
 //! A re-bake starts from the finished cache of the scene before the edit, remapped onto
 //! the edited scene ([`SurfaceCache::remap`]: samples of surviving triangles keep their
@@ -23,8 +23,7 @@
 //!    change one bounce further; the residual shrinks by the albedo times the share of
 //!    the hemisphere that changed. Three stages matter where two surfaces end up facing
 //!    each other closely (the Cornell box's short block moved next to the tall one: one
-//!    stage left 4 % relative RMS against a fresh bake, three leave 1.6 %, at a noise
-//!    floor of 1.2 % between two fresh bakes with different seeds).
+//!    stage is not enough there; docs/results.md, "Incremental re-bakes", has the figures).
 //!
 //!    Each indirect stage first bounds its integrand from every stored sample of both
 //!    caches ([`triangle_changes`]: the largest change anywhere on each triangle),

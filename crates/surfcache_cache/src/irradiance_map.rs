@@ -1,4 +1,4 @@
-//! Per-triangle adaptive irradiance maps (DESIGN.md §3.2), the thesis' surface cache.
+//! Per-triangle adaptive irradiance maps (docs/design.md, Caches), the thesis' surface cache.
 //!
 //! Every (triangle, side) owns a barycentric grid of order `n` (a power of two): samples
 //! E(i, j) at index coordinates `i + j ≤ n`, position φ(i/n, j/n), `s(n) = (n+1)(n+2)/2`
@@ -62,9 +62,8 @@
 //! asks for one point per distinct site and [`SurfaceCache::finish_round`] copies its
 //! estimate into every grid that uses it ([`CacheStats::sample_points`] counts points,
 //! `cache_bytes` stored copies). On a finely tessellated mesh whose triangles keep
-//! order-1 grids (Sponza at 1 sample/m) this halves the points: 990k → 520k, against
-//! 213k vertices for vertex lighting, the rest being corners on creases and the larger
-//! triangles' refinement. Edges are not shared: their samples are estimated once per
+//! order-1 grids this about halves the points (docs/results.md, "Sponza"); corners on
+//! creases and the larger triangles' refinement remain. Edges are not shared: their samples are estimated once per
 //! adjacent grid.
 //!
 //! **Buried samples.** An estimate whose `back_face_share` exceeds
@@ -140,7 +139,7 @@ pub const fn grid_size(n: u32) -> usize {
     (n + 1) * (n + 2) / 2
 }
 
-/// m(i, j) = (i+j)(i+j+1)/2 + j: where sample (i, j) is stored (DESIGN.md §3.2). Samples
+/// m(i, j) = (i+j)(i+j+1)/2 + j: where sample (i, j) is stored (docs/design.md, Caches). Samples
 /// are stored diagonal by diagonal (`d = i + j`), so the index does not depend on the
 /// order and the samples of an order-`n` grid occupy `0..s(n)`.
 #[inline]

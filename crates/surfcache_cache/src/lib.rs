@@ -1,5 +1,5 @@
 //! Surface caches: where baked irradiance lives, how it is looked up, and the textures it
-//! publishes for engines (DESIGN.md §3–4).
+//! publishes for engines (docs/design.md, Caches and Publishing).
 //!
 //! Three caches share one interface, [`SurfaceCache`]:
 //! - [`vertex_lighting`]: E at mesh vertices, barycentric interpolation (the baseline);
@@ -38,15 +38,16 @@ pub use lightmap::{LightmapSettings, Lightmaps};
 pub use texture::IrradianceTexture;
 pub use vertex_lighting::{VertexLighting, VertexLightingSettings};
 
-/// Which cache to bake.
+/// Which cache to bake. The default is the one that bakes game levels best for the time
+/// spent: lightmaps (docs/results.md, "Sponza: error against time").
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum Method {
     /// E at mesh vertices, interpolated with barycentrics.
     Vertex,
     /// Per-triangle adaptive irradiance maps (the thesis).
-    #[default]
     IrradianceMap,
     /// Texel lightmaps on TEXCOORD_1 or a generated atlas.
+    #[default]
     Lightmap,
 }
 
@@ -65,6 +66,23 @@ impl Method {
     /// Parses a command-line name.
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// Default fewest and most hemisphere samples per estimate. Irradiance maps and
+    /// vertex lighting take the estimator's (every sample point meets the bound on its
+    /// own, the thesis' model). A lightmap texel shares samples with its neighbours
+    /// ([`filter`]) and its adaptive rounds compare the *filtered* error with the bound,
+    /// so its own estimate starts far lower; the cap keeps those rounds from chasing the
+    /// dimmest, noisiest texels of a level (lit through small openings) to tens of
+    /// thousands of samples each.
+    pub fn default_sample_range(self) -> (u32, u32) {
+        match self {
+            Method::Lightmap => (64, 1024),
+            Method::Vertex | Method::IrradianceMap => {
+                let e = surfcache_trace::EstimatorSettings::default();
+                (e.min_samples, e.max_samples)
+            }
+        }
     }
 }
 

@@ -1,4 +1,4 @@
-//! Texel lightmaps on TEXCOORD_1 or a generated chart atlas (DESIGN.md §3.3): irradiance
+//! Texel lightmaps on TEXCOORD_1 or a generated chart atlas (docs/design.md, Caches): irradiance
 //! per texel of one texture per instance, looked up exactly as an engine samples it.
 //!
 //! - **Layout.** An instance whose mesh has a usable TEXCOORD_1 keeps it; its square
@@ -40,9 +40,8 @@ use surfcache_trace::{Estimate, EstimatorSettings, TracedScene};
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LightmapSettings {
     /// Texels per metre along a surface (density² texels per m²). Default 64: texels of
-    /// about 1.6 cm, 35 across a Cornell-box wall. With final gathering the built-in
-    /// Cornell box bakes in about 15 s at 1.0 % relative RMS error against the reference
-    /// (32: 2.0 % in 8 s; 128: 0.8 % in 36 s).
+    /// about 1.6 cm, 35 across a Cornell-box wall (error against time per density:
+    /// docs/results.md). Large scenes lower it to the bake's density budget.
     pub texels_per_metre: f32,
     /// Largest texture side in texels; generated atlases lower their density to fit,
     /// TEXCOORD_1 textures are clamped. Default 2048.

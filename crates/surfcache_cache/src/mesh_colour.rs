@@ -1,5 +1,5 @@
 //! Mesh-colour textures: per-triangle barycentric grids laid out as texel blocks so that
-//! bilinear filtering reproduces their linear interpolation (DESIGN.md §4; Yuksel et al.,
+//! bilinear filtering reproduces their linear interpolation (docs/design.md, Publishing; Yuksel et al.,
 //! "Mesh Colors", 2010, and its texture-mapped variant). Shared by the irradiance maps
 //! (order-n grids) and vertex lighting (order-1 grids).
 //!

@@ -1,4 +1,4 @@
-//! Vertex lighting (DESIGN.md §3.1): E at mesh vertices, interpolated with barycentrics.
+//! Vertex lighting (docs/design.md, Caches): E at mesh vertices, interpolated with barycentrics.
 //!
 //! The baseline cache. Every unique (instance, mesh vertex, side) gets one estimate at a
 //! [`SampleSite::Vertex`]: exactly on the vertex, about its vertex normal, rays lifted

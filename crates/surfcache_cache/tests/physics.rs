@@ -156,7 +156,7 @@ fn light_tight_box_stays_black_inside_maps_but_vertex_lighting_leaks() {
         // Vertex lighting estimates at the box's corners: a corner vertex lies on three
         // walls at once, its rays start on the walls' planes and most of them leave the
         // box, so every vertex sees the bright sky and interpolation spreads it over the
-        // triangles — the leak DESIGN.md §3.1 describes, shown here, not fixed.
+        // triangles — the leak docs/design.md, Caches describes, shown here, not fixed.
         let e = vertex.lookup(t, uv, true);
         assert!(
             e.min_element() > 0.1 * PI * sky,
@@ -366,7 +366,7 @@ fn refinement_follows_the_shadow_edge_only() {
 
 #[test]
 fn shadow_between_samples_is_caught_by_the_shadow_probes() {
-    // DESIGN.md §3.2: a hard shadow that falls between all samples of a triangle passes
+    // docs/design.md, Caches: a hard shadow that falls between all samples of a triangle passes
     // the error test while wrong. A 1 m floor of two triangles (order-2 samples at
     // x = 0, 0.5, 1) under a strip of shadow 0.2 < x < 0.3: the punctual-light shadow
     // probes send the grid to its maximum order, which resolves the strip.

@@ -61,20 +61,17 @@ impl BakeOptions {
         if !(self.max_rel_error.is_finite() && self.max_rel_error > 0.0) {
             bail!("--max-rel-error must be a positive number");
         }
-        let defaults = EstimatorSettings::default();
+        let (default_min, default_max) = self.method.default_sample_range();
         if let Some(n) = self.samples
             && (n == 0 || self.min_samples.is_some() || self.max_samples.is_some())
         {
             bail!("--samples takes a positive count and replaces --min-samples/--max-samples");
         }
-        let min_samples = self
-            .samples
-            .or(self.min_samples)
-            .unwrap_or(defaults.min_samples);
+        let min_samples = self.samples.or(self.min_samples).unwrap_or(default_min);
         let max_samples = self
             .samples
             .or(self.max_samples)
-            .unwrap_or(defaults.max_samples.max(min_samples));
+            .unwrap_or(default_max.max(min_samples));
         if min_samples == 0 || max_samples < min_samples {
             bail!("need 1 ≤ --min-samples ≤ --max-samples (got {min_samples} and {max_samples})");
         }

@@ -1,4 +1,4 @@
-//! The `surfcache` command-line tool (CONTRACT.md): `reference`, `trace`, `rays`,
+//! The `surfcache` command-line tool (docs/cli.md): `reference`, `trace`, `rays`,
 //! `export`, and `bake`/`query` as the caches land.
 //!
 //! Every command is a thin app: it loads a scene into a `bevy_ecs` world, runs the

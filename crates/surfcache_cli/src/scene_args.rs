@@ -9,7 +9,7 @@ use surfcache_core::{Environment, Scene};
 use surfcache_ecs::{BakeConfig, SurfcachePlugin, TracedSceneResource, spawn_scene};
 use surfcache_trace::TracedScene;
 
-/// Environment options (CONTRACT.md).
+/// Environment options (docs/cli.md).
 #[derive(Args, Debug, Clone)]
 pub struct EnvArgs {
     /// Environment radiance map, equirectangular OpenEXR (W/(m²·sr), +Y up, centre = −Z).

@@ -1,6 +1,6 @@
 //! Environment lighting: radiance arriving from infinitely far away, by direction.
 //!
-//! Maps are equirectangular with +Y up (CONTRACT.md): pixel (i, j) of a W×H image, row 0
+//! Maps are equirectangular with +Y up (docs/cli.md): pixel (i, j) of a W×H image, row 0
 //! at the top, covers u = (i+½)/W, v = (j+½)/H and looks along
 //! θ = vπ, φ = (u−½)2π, d = (sin θ sin φ, cos θ, −sin θ cos φ).
 
@@ -18,7 +18,7 @@ pub struct EnvironmentMap {
     pub texels: Vec<Vec3>,
 }
 
-/// Direction of image coordinates (u, v) ∈ [0,1]² (CONTRACT.md equirectangular convention).
+/// Direction of image coordinates (u, v) ∈ [0,1]² (docs/cli.md, environment maps).
 #[inline]
 pub fn uv_to_direction(uv: Vec2) -> Vec3 {
     let theta = uv.y * PI;

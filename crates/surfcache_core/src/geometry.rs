@@ -3,7 +3,7 @@
 use glam::{Vec2, Vec3};
 
 /// φ(u,v) = (1−u−v)A + uB + vC: the point of triangle (A,B,C) at barycentrics (u,v)
-/// (DESIGN.md §1).
+/// (docs/design.md, Physics).
 #[inline]
 pub fn triangle_point(a: Vec3, b: Vec3, c: Vec3, uv: Vec2) -> Vec3 {
     a * (1.0 - uv.x - uv.y) + b * uv.x + c * uv.y

@@ -1,7 +1,7 @@
 //! Scene data: primitives p = (Δ, ν, m) grouped into meshes, materials, lights, environment.
 //!
 //! A [`Mesh`] is one glTF primitive: indexed triangles with one material, vertex normals
-//! (the normal function ν of DESIGN.md §1) and optional UV sets. An [`Instance`] places a
+//! (the normal function ν of docs/design.md, Physics) and optional UV sets. An [`Instance`] places a
 //! mesh in the world with a material. Lights are stored in world space.
 
 use crate::{environment::Environment, geometry};
@@ -259,7 +259,7 @@ pub enum AlphaMode {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
     pub name: String,
-    /// Diffuse albedo ρ = baseColorFactor.rgb × (1 − metallic) (CONTRACT.md).
+    /// Diffuse albedo ρ = baseColorFactor.rgb × (1 − metallic) (docs/cli.md).
     pub albedo: Vec3,
     /// baseColorFactor.a
     pub alpha: f32,

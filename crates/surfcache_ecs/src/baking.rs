@@ -1,6 +1,6 @@
 //! Bakes and re-bakes of the surface cache, off the frame.
 //!
-//! **Invalidation policy** ([`start_bake`], DESIGN.md §6). Each new traced scene, and
+//! **Invalidation policy** ([`start_bake`], docs/design.md, Incremental re-baking). Each new traced scene, and
 //! each change of [`BakeConfig`], starts a bake and supersedes (cancels) one in flight;
 //! when nothing changed that the baseline depends on, the baseline is published again
 //! as it is. It re-bakes *incrementally* from the

@@ -19,7 +19,7 @@ const MAX_PIXELS: usize = 1 << 28;
 /// otherwise ask for any amount of memory).
 const MAX_SAMPLE_BYTES: usize = 1 << 32;
 
-/// Reads an equirectangular radiance map (CONTRACT.md convention; negative values are
+/// Reads an equirectangular radiance map (docs/cli.md convention; negative values are
 /// clamped to 0 with one warning).
 pub fn read_environment_map(path: &Path) -> Result<(EnvironmentMap, Vec<String>), IoError> {
     let (width, height, mut texels, mut warnings) = read_rgb(path)?;

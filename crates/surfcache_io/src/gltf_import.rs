@@ -1,7 +1,7 @@
 //! glTF 2.0 import (`.gltf` with external or embedded buffers, `.glb`) into a [`Scene`].
 //!
 //! The node hierarchy becomes one [`Instance`] per (node, triangle primitive), sharing one
-//! `Arc<Mesh>` per (mesh, primitive). Materials follow CONTRACT.md (albedo =
+//! `Arc<Mesh>` per (mesh, primitive). Materials follow docs/cli.md (albedo =
 //! baseColorFactor.rgb × (1 − metallic), emission = emissiveFactor × emissive strength);
 //! textures are decoded from sRGB to linear once per image and only when a material in the
 //! scene uses them. `KHR_lights_punctual` lights become world-space [`Light`]s.
@@ -604,7 +604,7 @@ fn default_material() -> Material {
     Material::diffuse("default", Vec3::ZERO)
 }
 
-/// glTF material → [`Material`] (CONTRACT.md: albedo = base colour × (1 − metallic)).
+/// glTF material → [`Material`] (docs/cli.md: albedo = base colour × (1 − metallic)).
 fn convert_material(
     m: &gltf::Material<'_>,
     textures: &HashMap<usize, Arc<Texture>>,

@@ -1,5 +1,5 @@
 //! Monte Carlo estimation of irradiance E(x, ν) = ∫_H L_in(x, ω) ⟨ν, ω⟩ dω at one point,
-//! with a selectable sampler and the thesis' adaptive stopping rule (DESIGN.md §2).
+//! with a selectable sampler and the thesis' adaptive stopping rule (docs/design.md, Estimator).
 
 use crate::{
     path_tracer::{FirstHit, IrradianceLookup, PathOptions, PathSample},
@@ -92,6 +92,13 @@ pub const FLOOR_FRACTION: f32 = 0.01;
 /// else lights the point (or at `max_samples`).
 pub const ZERO_RUN_EVENTS: f64 = 1.841;
 
+/// Samples after which an estimate whose first rays all met the back of a single-sided
+/// surface stops: the point is buried inside closed geometry (its back-face share is 1,
+/// above any cache's burial threshold), and the caches fill it from its neighbours. A
+/// point whose true back-face share is s stops here wrongly with probability s^16: below
+/// 2·10⁻⁵ for the points (s ≤ ½) the caches keep.
+pub const BURIED_PROBE_SAMPLES: u32 = 16;
+
 /// Independent randomised QMC replicates: sample `k` of a point belongs to replicate
 /// `k mod R`. The standard error comes from the spread of the replicate means, which
 /// (unlike the spread of single samples) sees the stratification's gain.
@@ -119,7 +126,7 @@ impl Accumulator {
         self.sum / self.count.max(1) as f64
     }
 
-    /// Standard error of the mean, sqrt(Σ(X_i − Ē)² / (n(n−1))) per channel (DESIGN.md §2).
+    /// Standard error of the mean, sqrt(Σ(X_i − Ē)² / (n(n−1))) per channel (docs/design.md, Estimator).
     pub fn std_error(&self) -> DVec3 {
         if self.count < 2 {
             return DVec3::splat(f64::INFINITY);
@@ -131,7 +138,7 @@ impl Accumulator {
 }
 
 /// Coefficient of variation of the mean, C = se / (Ē + ε), the maximum over the channels
-/// (DESIGN.md §2); a channel with no spread counts as exact.
+/// (docs/design.md, Estimator); a channel with no spread counts as exact.
 pub fn relative_error(mean: DVec3, std_error: DVec3, floor: f64) -> f64 {
     (0..3)
         .map(|c| {
@@ -229,7 +236,7 @@ impl Estimate {
 /// Without next-event estimation X = L_in(ω) ⟨ν, ω⟩ / p(ω), with ω drawn uniformly
 /// (p = 1/2π) or cosine-weighted (p = cos θ/π, X = π L_in). With it, X adds the light
 /// sample of [`TracedScene::direct_light_sample`] and the continuation's emission is
-/// MIS-weighted. Directions under the geometric surface carry no light (CONTRACT.md).
+/// MIS-weighted. Directions under the geometric surface carry no light (docs/cli.md).
 ///
 /// With `focus`, X estimates the integral over the directions of that cone only: ω is
 /// drawn uniformly in the cone (p = 1/Ω), and next-event samples count only inside it,
@@ -291,7 +298,7 @@ pub fn hemisphere_sample(
 
 /// Draws samples of E at `p` until C ≤ `settings.max_rel_error` (checked after every
 /// round of [`QMC_REPLICATES`] samples, from `min_samples` on) or `max_samples` are
-/// drawn (DESIGN.md §2), and adds the punctual lights' exact part.
+/// drawn (docs/design.md, Estimator), and adds the punctual lights' exact part.
 ///
 /// `key` identifies the point: sample streams are keyed by (`seed`, `key`), so the
 /// result does not depend on threads, batching or frames. Pseudo-random samplers take
@@ -303,7 +310,8 @@ pub fn hemisphere_sample(
 /// ε > 0, which sets the scale), except where most first rays hit the back of a
 /// single-sided surface: such a point lies inside geometry (a buried sample, which the
 /// caches discard at their default `buried_threshold` of 0.5), and keeps stopping at
-/// `min_samples`; and except for direct light alone (`max_bounces = Some(0)`) and with
+/// `min_samples` (at [`BURIED_PROBE_SAMPLES`] when every first ray so far met a back
+/// face); and except for direct light alone (`max_bounces = Some(0)`) and with
 /// `gather`, where every sample meets the lights or the gathered cache: an all-zero run
 /// then means that nothing the point sees is lit (a light-tight interior, a sealed void),
 /// and stops at `min_samples` too.
@@ -569,7 +577,10 @@ fn sample_adaptively(
         let total = (mean + offset.as_dvec3()).abs();
         let zero_run = zero_run_error(n, lit, back, unseen, total, floor);
         let c = relative_error(total, se, floor).max(zero_run.1);
-        if n >= max || (n >= min && c <= bound as f64) {
+        // Every first ray so far met the back of a single-sided surface: the point lies
+        // inside a solid, and the caches discard it whatever more samples would say.
+        let buried = n >= BURIED_PROBE_SAMPLES && back == n;
+        if n >= max || (n >= min && c <= bound as f64) || buried {
             break (mean, se.max(DVec3::splat(zero_run.0)));
         }
     };

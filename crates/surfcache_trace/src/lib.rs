@@ -28,8 +28,9 @@ pub mod traced_scene;
 
 pub use bvh::{Bvh, Hit, SimdLevel};
 pub use irradiance::{
-    Estimate, EstimatorSettings, FLOOR_FRACTION, PointInScene, Query, Sampler, ZERO_RUN_EVENTS,
-    estimate, estimate_change, reference_irradiance, unchanged, zero_run_std_error,
+    BURIED_PROBE_SAMPLES, Estimate, EstimatorSettings, FLOOR_FRACTION, PointInScene, Query,
+    Sampler, ZERO_RUN_EVENTS, estimate, estimate_change, reference_irradiance, unchanged,
+    zero_run_std_error,
 };
 pub use light_sampling::LightSampler;
 pub use path_tracer::{FirstHit, IrradianceLookup, PathOptions};

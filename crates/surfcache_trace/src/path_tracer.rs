@@ -13,8 +13,8 @@ use surfcache_core::{
 };
 
 /// Russian roulette starts at this bounce: the first bounces, which carry most of the
-/// indirect light, are never cut short (measured on `cornell`: 26 % less variance than
-/// roulette from the first bounce, for about 10 % more rays).
+/// indirect light, are never cut short (docs/results.md, "Figures once kept in code
+/// docs").
 pub const ROULETTE_FROM_BOUNCE: u32 = 2;
 
 /// Limits and techniques of one path.
@@ -63,7 +63,7 @@ impl TracedScene {
     /// Irradiance at `p` from the punctual lights, by shadow rays:
     /// `I cos θ / r²` for point and spot lights (times the glTF cone falloff),
     /// `E_s cos θ` for directional lights, with cos θ = ⟨ν, ω_l⟩ about the shading normal and
-    /// nothing from below the geometric surface (CONTRACT.md).
+    /// nothing from below the geometric surface (docs/cli.md).
     pub fn punctual_irradiance(&self, p: &SurfacePoint) -> Vec3 {
         self.punctual_irradiance_from(p, self.spawn_origin(p), &mut 0)
     }

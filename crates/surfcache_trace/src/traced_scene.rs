@@ -28,7 +28,7 @@ pub fn name_key(name: &str) -> u64 {
 pub const SPAWN_OFFSET: f32 = 2e-5;
 
 /// Query points farther than this fraction of the diagonal from every surface are not on
-/// the scene (CONTRACT.md `query`).
+/// the scene (docs/cli.md, `query`).
 pub const SURFACE_TOLERANCE: f32 = 1e-4;
 
 /// A point on one side of a triangle, with the frame irradiance is measured in.
@@ -154,7 +154,7 @@ impl TracedScene {
                 s.geometric_normals.push(geo);
                 s.normals.push(idx.map(|i| {
                     let n = (normal_matrix * mesh.normals[i as usize]).normalize_or(geo);
-                    // The normal function must keep ⟨μ_X, μ⟩ > 0 (DESIGN.md §1).
+                    // The normal function must keep ⟨μ_X, μ⟩ > 0 (docs/design.md, Physics).
                     if n.dot(geo) > 0.0 { n } else { geo }
                 }));
                 s.uv0.push(if mesh.uv0.is_empty() {
@@ -279,7 +279,7 @@ impl TracedScene {
 
     /// The point at barycentrics `uv` of triangle `t`, on the front side (`front = true`)
     /// or the back side. The shading normal is ν(u,v) = normalize(wμ_A + uμ_B + vμ_C)
-    /// (DESIGN.md §1), flipped to the side, and replaced by μ where it would point below
+    /// (docs/design.md, Physics), flipped to the side, and replaced by μ where it would point below
     /// the geometric surface.
     #[inline]
     pub fn surface_point(&self, t: u32, uv: Vec2, front: bool) -> SurfacePoint {
@@ -348,7 +348,7 @@ impl TracedScene {
         q + p.geometric_normal * off
     }
 
-    /// The surface a query point `x` with normal `n` lies on (CONTRACT.md `query`): among
+    /// The surface a query point `x` with normal `n` lies on (docs/cli.md, `query`): among
     /// triangles within [`SURFACE_TOLERANCE`] × diagonal of `x`, the one whose geometric
     /// normal is most nearly parallel to `n` (either orientation), then whose plane passes
     /// closest to `x`; the side is the one whose geometric normal points along `n`.

@@ -1,5 +1,5 @@
 //! `surfcache bake`: bakes a surface cache and writes it, its textures, the scene with
-//! UV1 and a report into an output directory (CONTRACT.md).
+//! UV1 and a report into an output directory (docs/cli.md).
 
 use crate::{
     bake_dir::{self, StagingDir},
@@ -22,7 +22,7 @@ use surfcache_cache::{
 };
 use surfcache_io::Untrusted;
 
-/// `surfcache bake` options (CONTRACT.md, plus the project's own).
+/// `surfcache bake` options (docs/cli.md, plus the project's own).
 #[derive(clap::Args)]
 pub struct BakeArgs {
     /// A .gltf/.glb file or a built-in scene name (cornell).
@@ -30,7 +30,7 @@ pub struct BakeArgs {
     #[command(flatten)]
     env: EnvArgs,
     /// vertex, irradiance-map (per-triangle adaptive, the thesis) or lightmap (texels)
-    /// [default: irradiance-map].
+    /// [default: lightmap].
     #[arg(long)]
     method: Option<String>,
     /// Relative error bound of one surface estimate: sampling stops once the standard error
@@ -38,10 +38,12 @@ pub struct BakeArgs {
     /// irradiance).
     #[arg(long, default_value_t = 0.01)]
     max_rel_error: f32,
-    /// Fewest hemisphere samples per estimate [default: 256].
+    /// Fewest hemisphere samples per estimate [default: 64 for lightmaps, whose texels
+    /// share samples with their neighbours; 256 otherwise].
     #[arg(long)]
     min_samples: Option<u32>,
-    /// Most hemisphere samples per estimate [default: 65536].
+    /// Most hemisphere samples per estimate [default: 1024 for lightmaps; 65536
+    /// otherwise].
     #[arg(long)]
     max_samples: Option<u32>,
     /// Sample budget: exactly N hemisphere samples per estimate (per texel, per sample

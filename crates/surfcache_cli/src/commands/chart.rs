@@ -1,4 +1,4 @@
-//! `surfcache chart`: speed against accuracy (DESIGN.md §7). Bakes every method × sampler
+//! `surfcache chart`: speed against accuracy (docs/design.md, Speed against accuracy). Bakes every method × sampler
 //! over a sweep of error bounds, in process through the same bake path as `surfcache bake`,
 //! measures each bake's time, cache bytes and sample points, and its relative RMS error
 //! against a converged reference at a fixed point set (the figure `surfcache compare`

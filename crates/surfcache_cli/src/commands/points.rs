@@ -52,7 +52,7 @@ pub fn run(args: PointsArgs) -> Result<()> {
             other => bail!("unknown side '{other}' (known: front, back, random)"),
         };
         let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), front);
-        // Report the side through the geometric normal: CONTRACT.md picks the side whose
+        // Report the side through the geometric normal: docs/cli.md picks the side whose
         // geometric normal points along n.
         let (x, n) = (p.position, p.geometric_normal);
         rows.push(format!("{},{},{},{},{},{}", x.x, x.y, x.z, n.x, n.y, n.z));

@@ -1,5 +1,5 @@
 //! `surfcache query`: baked irradiance E(x, n) at query points, from a bake directory
-//! alone (CONTRACT.md).
+//! alone (docs/cli.md).
 
 use crate::{
     bake_dir::read_archive,
@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use std::path::PathBuf;
 use surfcache_io::Untrusted;
 
-/// `surfcache query` options (CONTRACT.md).
+/// `surfcache query` options (docs/cli.md).
 #[derive(clap::Args)]
 pub struct QueryArgs {
     /// A directory written by `surfcache bake`.
