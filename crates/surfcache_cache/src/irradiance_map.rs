@@ -114,6 +114,7 @@
 //! assert_eq!(maps.stats().order_histogram[&2], 4); // 2 triangles × 2 sides, flat E
 //! ```
 
+use crate::burial::Burial;
 use crate::{
     CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
     UNMAPPED, crossings, mesh_colour,
@@ -427,12 +428,6 @@ impl EstimateTotals {
     }
 }
 
-/// Burial state of a sample while baking.
-const VALID: u8 = 0;
-const BURIED: u8 = 1;
-const FILLED_NOW: u8 = 2;
-const FILLED: u8 = 3;
-
 /// What only baking needs: raw estimates, their errors, burial flags, refinement state.
 /// Arrays are parallel to the stored samples.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -452,8 +447,8 @@ struct Working {
     /// Values after burial filling, and their standard errors.
     filled: Vec<Vec3>,
     filled_error: Vec<Vec3>,
-    /// Burial state ([`BURIED`] for buried samples, [`VALID`] otherwise).
-    burial: Vec<u8>,
+    /// Burial state of every sample ([`Burial::Buried`] or [`Burial::Valid`] when estimated).
+    burial: Vec<Burial>,
     /// Order (log2) of each grid slot's first round; empty: `min(2, n_max)` everywhere.
     start_log2: Vec<u8>,
     /// Grid slots whose punctual lights' shadow boundary crosses them
@@ -661,12 +656,13 @@ impl IrradianceMaps {
         w.filled[range.clone()].copy_from_slice(&w.raw[range.clone()]);
         w.filled_error[range.clone()].copy_from_slice(&w.std_error[range.clone()]);
         let burial = &mut w.burial[range];
-        if burial.iter().all(|&b| b == VALID) || burial.iter().all(|&b| b != VALID) {
+        if burial.iter().all(|&b| b == Burial::Valid) || burial.iter().all(|&b| b != Burial::Valid)
+        {
             return;
         }
         burial.iter_mut().for_each(|b| {
-            if *b != VALID {
-                *b = BURIED;
+            if *b != Burial::Valid {
+                *b = Burial::Buried;
             }
         });
         loop {
@@ -675,7 +671,7 @@ impl IrradianceMaps {
                 for j in 0..=d {
                     let i = d - j;
                     let m = grid_index(i, j);
-                    if burial[m] != BURIED {
+                    if burial[m] != Burial::Buried {
                         continue;
                     }
                     let (mut sum, mut err, mut count) = (Vec3::ZERO, Vec3::ZERO, 0u32);
@@ -686,7 +682,7 @@ impl IrradianceMaps {
                             continue;
                         }
                         let k = grid_index(a as u32, b as u32);
-                        if burial[k] == VALID || burial[k] == FILLED {
+                        if burial[k] == Burial::Valid || burial[k] == Burial::Filled {
                             sum += w.filled[base + k];
                             err += w.filled_error[base + k];
                             count += 1;
@@ -695,7 +691,7 @@ impl IrradianceMaps {
                     if count > 0 {
                         w.filled[base + m] = sum / count as f32;
                         w.filled_error[base + m] = err / count as f32;
-                        burial[m] = FILLED_NOW;
+                        burial[m] = Burial::FilledNow;
                         changed = true;
                     }
                 }
@@ -704,8 +700,8 @@ impl IrradianceMaps {
                 break;
             }
             burial.iter_mut().for_each(|b| {
-                if *b == FILLED_NOW {
-                    *b = FILLED;
+                if *b == Burial::FilledNow {
+                    *b = Burial::Filled;
                 }
             });
         }
@@ -719,7 +715,7 @@ impl IrradianceMaps {
         let eps = self.settings.floor;
         let mut worst = 0.0f32;
         for_each_new_sample(n / 2, n, |i, j, m| {
-            if w.burial[base + m] != VALID {
+            if w.burial[base + m] != Burial::Valid {
                 return;
             }
             let [[ai, aj], [bi, bj]] = coarse_neighbours(i, j);
@@ -844,7 +840,7 @@ impl SurfaceCache for IrradianceMaps {
         let mut raw = vec![Vec3::ZERO; total];
         let mut samples = vec![0u32; total];
         let mut std_error = vec![Vec3::ZERO; total];
-        let mut burial = vec![VALID; total];
+        let mut burial = vec![Burial::Valid; total];
         for g in 0..slots {
             let (old, new) = (
                 order_of_level(self.levels[g]),
@@ -868,7 +864,11 @@ impl SurfaceCache for IrradianceMaps {
                         raw[b] = w.raw[a];
                         samples[b] = w.samples[a];
                         std_error[b] = w.std_error[a];
-                        burial[b] = if w.burial[a] == VALID { VALID } else { BURIED };
+                        burial[b] = if w.burial[a] == Burial::Valid {
+                            Burial::Valid
+                        } else {
+                            Burial::Buried
+                        };
                     }
                 }
             }
@@ -887,9 +887,9 @@ impl SurfaceCache for IrradianceMaps {
                 samples[base + m] = e.samples;
                 std_error[base + m] = e.std_error;
                 burial[base + m] = if e.back_face_share > threshold {
-                    BURIED
+                    Burial::Buried
                 } else {
-                    VALID
+                    Burial::Valid
                 };
             });
         }
@@ -909,7 +909,7 @@ impl SurfaceCache for IrradianceMaps {
                 Self::fill_grid(&mut w, self.offsets[g] as usize, n);
             }
         }
-        self.buried = w.burial.iter().filter(|&&b| b != VALID).count() as u64;
+        self.buried = w.burial.iter().filter(|&&b| b != Burial::Valid).count() as u64;
         // Decide which of the grids that just doubled double again.
         w.refine.iter_mut().for_each(|r| *r = false);
         let bound = self.settings.interpolation_error;
@@ -918,10 +918,11 @@ impl SurfaceCache for IrradianceMaps {
             if n < w.max_orders[g as usize / 2] {
                 let base = self.offsets[g as usize] as usize;
                 let burial = &w.burial[base..base + grid_size(n)];
-                let mixed = burial.contains(&VALID) && burial.iter().any(|&b| b != VALID);
+                let mixed =
+                    burial.contains(&Burial::Valid) && burial.iter().any(|&b| b != Burial::Valid);
                 // A grid buried all over needs no detail, whatever crosses it.
                 let shadow = w.shadow_edges.get(g as usize).copied().unwrap_or(false)
-                    && burial.contains(&VALID);
+                    && burial.contains(&Burial::Valid);
                 // An order-1 grid (a re-bake's prior) has no new samples to test: it
                 // doubles.
                 w.refine[g as usize] =

@@ -17,6 +17,7 @@
 pub mod archive;
 pub mod atlas;
 pub mod bake;
+mod burial;
 pub mod charts;
 pub mod crossings;
 pub mod filter;

@@ -19,6 +19,7 @@
 //! - **Storage.** Three half floats a texel ([`crate::stored_rgb`]) with one power-of-two
 //!   [`StoreScale`].
 
+use crate::burial::Burial;
 use crate::{
     CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
     UNMAPPED,
@@ -85,13 +86,6 @@ const NONE: u32 = u32::MAX;
 /// Barycentric margin of sample positions: every barycentric coordinate is at least this.
 const INSIDE_MARGIN: f32 = 1e-4;
 
-/// Texel states while filling.
-const EMPTY: u8 = 0;
-const VALID: u8 = 1;
-const BURIED: u8 = 2;
-/// Buried, moved to the visible part of its footprint, waiting for a fresh estimate.
-const MOVED: u8 = 3;
-
 /// One instance's texture within the flat texel arrays of a layer.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 struct InstanceMap {
@@ -150,7 +144,7 @@ pub struct Lightmaps {
     #[serde(skip)]
     merged: Vec<TexelEstimate>,
     #[serde(skip)]
-    state: Vec<u8>,
+    state: Vec<Burial>,
     /// Sample point and shading normal of every owned slot (the filter's guides).
     #[serde(skip)]
     guide: Vec<(Vec3, Vec3)>,
@@ -487,7 +481,7 @@ impl Lightmaps {
                 let valid: Vec<bool> = range
                     .clone()
                     .map(|k| {
-                        self.state[k] == VALID
+                        self.state[k] == Burial::Valid
                             && self.crossing_slot.get(k).is_none_or(|&c| c == NONE)
                     })
                     .collect();
@@ -530,7 +524,7 @@ impl Lightmaps {
             stats.samples += e.samples as u64;
             stats.max_samples_per_point = stats.max_samples_per_point.max(e.samples);
             match state[slot] {
-                BURIED => stats.buried += 1,
+                Burial::Buried => stats.buried += 1,
                 _ => {
                     let floor = plan.map_or(0.0, |p| p.floor).max(f32::MIN_POSITIVE);
                     let c =
@@ -540,7 +534,7 @@ impl Lightmaps {
             }
         }
         stats.mean_rel_error = rel_error / (stats.sample_points - stats.buried).max(1) as f64;
-        self.buried_slots = state.iter().map(|&st| st == BURIED).collect();
+        self.buried_slots = state.iter().map(|&st| st == Burial::Buried).collect();
         // Chart of each texel of a layer (for the same-chart preference of the fill).
         let texel_chart: Vec<u32> = self
             .owner
@@ -891,8 +885,10 @@ fn neighbours(k: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
 /// to the mean of those, which then count as valid), preferring neighbours of the same
 /// chart; only when no buried texel has such a neighbour does a pass take any valid
 /// neighbour. Buried texels that no valid texel reaches keep their own estimate.
-fn fill_buried(values: &mut [Vec3], state: &mut [u8], chart: &[u32], w: usize, h: usize) {
-    let mut pending: Vec<usize> = (0..values.len()).filter(|&k| state[k] == BURIED).collect();
+fn fill_buried(values: &mut [Vec3], state: &mut [Burial], chart: &[u32], w: usize, h: usize) {
+    let mut pending: Vec<usize> = (0..values.len())
+        .filter(|&k| state[k] == Burial::Buried)
+        .collect();
     let mut updates: Vec<(usize, Vec3)> = Vec::new();
     let mut any_chart = false;
     while !pending.is_empty() {
@@ -900,7 +896,7 @@ fn fill_buried(values: &mut [Vec3], state: &mut [u8], chart: &[u32], w: usize, h
         for &k in &pending {
             let (mut sum, mut count) = (Vec3::ZERO, 0u32);
             for j in neighbours(k, w, h) {
-                if state[j] == VALID && (any_chart || chart[j] == chart[k]) {
+                if state[j] == Burial::Valid && (any_chart || chart[j] == chart[k]) {
                     sum += values[j];
                     count += 1;
                 }
@@ -919,24 +915,24 @@ fn fill_buried(values: &mut [Vec3], state: &mut [u8], chart: &[u32], w: usize, h
         any_chart = false;
         for &(k, v) in &updates {
             values[k] = v;
-            state[k] = VALID;
+            state[k] = Burial::Valid;
         }
-        pending.retain(|&k| state[k] == BURIED);
+        pending.retain(|&k| state[k] == Burial::Buried);
     }
 }
 
 /// Dilation: `passes` times, every texel no triangle owns that touches a set texel takes
 /// the mean of its set 8-neighbours and becomes set (texels beyond stay black). Returns
 /// how many texels were filled.
-fn dilate(values: &mut [Vec3], state: &mut [u8], w: usize, h: usize, passes: u32) -> u64 {
+fn dilate(values: &mut [Vec3], state: &mut [Burial], w: usize, h: usize, passes: u32) -> u64 {
     let mut filled = 0;
     let mut updates: Vec<(usize, Vec3)> = Vec::new();
     for _ in 0..passes {
         updates.clear();
-        for k in (0..values.len()).filter(|&k| state[k] == EMPTY) {
+        for k in (0..values.len()).filter(|&k| state[k] == Burial::Empty) {
             let (mut sum, mut count) = (Vec3::ZERO, 0u32);
             for j in neighbours(k, w, h) {
-                if state[j] != EMPTY {
+                if state[j] != Burial::Empty {
                     sum += values[j];
                     count += 1;
                 }
@@ -950,7 +946,7 @@ fn dilate(values: &mut [Vec3], state: &mut [u8], w: usize, h: usize, passes: u32
         }
         for &(k, v) in &updates {
             values[k] = v;
-            state[k] = VALID;
+            state[k] = Burial::Valid;
         }
         filled += updates.len() as u64;
     }
@@ -1103,27 +1099,29 @@ impl SurfaceCache for Lightmaps {
         let total = self.layers * self.layer_texels;
         if self.merged.len() != total {
             self.merged = vec![TexelEstimate::default(); total];
-            self.state = vec![EMPTY; total];
+            self.state = vec![Burial::Empty; total];
             self.guide = self.texel_guides(scene);
         }
         let mut moved = Vec::new();
         for (&slot, e) in self.slots.iter().zip(estimates) {
             let slot = slot as usize;
             self.merged[slot].merge(e);
-            if matches!(self.state[slot], EMPTY | MOVED) {
+            if matches!(self.state[slot], Burial::Empty | Burial::Moved) {
                 let buried = e.back_face_share > self.settings.buried_threshold;
                 let exit = self.exits.get(slot).copied().flatten();
                 self.state[slot] = match (buried, exit, self.state[slot]) {
-                    (false, _, _) => VALID,
+                    (false, _, _) => Burial::Valid,
                     // Inside a solid, with a visible part of the footprint beyond the
                     // crossing: estimate there instead.
-                    (true, Some(uv), EMPTY) if self.plan.is_some() && self.priors.is_empty() => {
+                    (true, Some(uv), Burial::Empty)
+                        if self.plan.is_some() && self.priors.is_empty() =>
+                    {
                         self.site_uv[slot] = uv;
                         self.merged[slot] = TexelEstimate::default();
                         moved.push(slot as u32);
-                        MOVED
+                        Burial::Moved
                     }
-                    _ => BURIED,
+                    _ => Burial::Buried,
                 };
             }
         }
@@ -1139,7 +1137,7 @@ impl SurfaceCache for Lightmaps {
         }
         if let Some(plan) = plan.filter(|p| p.bound > 0.0) {
             for (slot, (e, (v, s))) in self.merged.iter().zip(&filtered).enumerate() {
-                if self.state[slot] == VALID
+                if self.state[slot] == Burial::Valid
                     && e.samples > 0
                     && e.samples < plan.max
                     && plan.relative_error(*v, *s) > plan.bound

@@ -34,6 +34,9 @@ pub fn parse_sampler(name: &str) -> Result<Sampler> {
     })
 }
 
+/// Most à-trous passes `--filter-passes` accepts (the footprint doubles with each).
+pub const MAX_FILTER_PASSES: u32 = 8;
+
 /// Every option of a bake besides the scene (see `surfcache bake --help`).
 #[derive(Clone, Debug)]
 pub struct BakeOptions {
@@ -53,6 +56,8 @@ pub struct BakeOptions {
     pub both_sides: bool,
     /// Irradiance maps: estimate shared corners once (`--no-share-corners` turns it off).
     pub share_corners: bool,
+    /// Lightmaps: passes of the texel filter (the cache's own if `None`).
+    pub filter_passes: Option<u32>,
 }
 
 impl BakeOptions {
@@ -92,6 +97,15 @@ impl BakeOptions {
                 bail!("--interpolation-error must be a positive number");
             }
             cache.set_interpolation_error(e);
+        }
+        if let Some(n) = self.filter_passes {
+            let CacheSettings::Lightmap(lightmap) = &mut cache else {
+                bail!("--filter-passes applies to --method lightmap only");
+            };
+            if n > MAX_FILTER_PASSES {
+                bail!("--filter-passes takes at most {MAX_FILTER_PASSES} passes");
+            }
+            lightmap.filter.iterations = n;
         }
         Ok(BakeSettings {
             cache,

@@ -83,6 +83,11 @@ pub struct BakeArgs {
     /// the triangles around a vertex that may share them.
     #[arg(long)]
     no_share_corners: bool,
+    /// Lightmaps: à-trous passes of the filter that shares samples between neighbouring
+    /// texels (docs/design.md, Filtering); 0 estimates every texel on its own
+    /// [default: 1].
+    #[arg(long)]
+    filter_passes: Option<u32>,
     /// Output directory (created; replaced if it holds an earlier bake).
     #[arg(short = 'o', long = "out")]
     out: PathBuf,
@@ -113,6 +118,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         gather: args.gather,
         both_sides,
         share_corners: !args.no_share_corners,
+        filter_passes: args.filter_passes,
     };
     let settings = options.settings()?;
     let (min_samples, max_samples) = (

@@ -460,6 +460,7 @@ pub fn run(args: ChartArgs) -> Result<()> {
                         gather: spec.gather,
                         both_sides: spec.both_sides,
                         share_corners: true,
+                        filter_passes: None,
                     };
                     let elapsed_at_start = sweep_start.elapsed();
                     let reached = std::sync::Mutex::new(JobProgress::default());
