@@ -333,13 +333,24 @@ fn a_prop_piercing_a_wall_irradiance_maps() {
 }
 
 #[test]
-#[ignore = "issue #12: 6.6 % (lightmaps) and 7.8 % (irradiance maps) at 1 mm (docs/results.md)"]
-fn a_box_standing_on_and_piercing_a_floor() {
-    check_contacts(&boxes_on_a_floor(), &METHODS);
+fn a_box_standing_on_and_piercing_a_floor_lightmap() {
+    check_contacts(&boxes_on_a_floor(), &[Method::Lightmap]);
 }
 
 #[test]
-#[ignore = "issue #12: the side a single-sided wall faces reads dark (docs/results.md)"]
-fn a_t_junction_of_walls() {
-    check_contacts(&t_junction(), &METHODS);
+#[ignore = "issue #12: irradiance maps 7.8 % at 1 mm (docs/results.md)"]
+fn a_box_standing_on_and_piercing_a_floor_irradiance_maps() {
+    check_contacts(&boxes_on_a_floor(), &[Method::IrradianceMap]);
+}
+
+#[test]
+#[ignore = "issue #12: lightmaps 5.1 % at 1 mm behind the wall (docs/results.md)"]
+fn a_t_junction_of_walls_lightmap() {
+    check_contacts(&t_junction(), &[Method::Lightmap]);
+}
+
+#[test]
+#[ignore = "issue #12: grid points on the line where the wall stands read dark (docs/results.md)"]
+fn a_t_junction_of_walls_irradiance_maps() {
+    check_contacts(&t_junction(), &[Method::IrradianceMap]);
 }

@@ -57,6 +57,10 @@ pub struct Probe {
     /// Barycentrics on the sample's triangle just beyond the nearest crossing met from
     /// behind, if that point lies on the triangle (module docs).
     pub exit: Option<Vec2>,
+    /// The sample lies on a crossing surface (met from behind within the boundary
+    /// tolerance: a texel centre on the line where a wall stands). Its own estimate would
+    /// see that surface at t ≈ 0 in every direction; it belongs at [`Probe::exit`].
+    pub touching: bool,
 }
 
 /// Probes the surface around barycentrics `uv` of `triangle` on the given side within
@@ -125,10 +129,12 @@ pub fn probe(scene: &TracedScene, triangle: u32, uv: Vec2, front: bool, reach: f
             }
         }
     }
+    let touching = exit.is_some_and(|(t, _)| t < boundary_tolerance);
     let exit = exit.map(|(_, uv)| uv);
     Probe {
         crossing: best.map(|(_, line)| line),
         exit,
+        touching,
     }
 }
 

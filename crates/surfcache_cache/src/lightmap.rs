@@ -602,7 +602,20 @@ impl Lightmaps {
                     t => {
                         let m = &self.maps[self.triangle_instance[t as usize] as usize];
                         let reach = 0.75 / m.texels_per_metre.max(f32::MIN_POSITIVE);
-                        (uv, crossings::probe(scene, t, uv, layer == 0, reach))
+                        let probe = crossings::probe(scene, t, uv, layer == 0, reach);
+                        // A centre on a crossing surface is estimated just beyond it, on
+                        // the open side, from the first round on; its crossing line is
+                        // oriented from there.
+                        match probe.exit {
+                            Some(exit) if probe.touching => (
+                                exit,
+                                Probe {
+                                    exit: None,
+                                    ..probe
+                                },
+                            ),
+                            _ => (uv, probe),
+                        }
                     }
                 }
             })
