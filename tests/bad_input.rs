@@ -6,6 +6,9 @@
 //! Inputs that are only doubtful (points/lines primitives, degenerate triangles, negative
 //! radiance) load with exactly one `warning: …` line and exit 0.
 
+mod common;
+
+use common::pack_glb;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -146,26 +149,11 @@ fn write_gltf(dir: &Path, name: &str, doc: &Value, bin: &[u8]) -> PathBuf {
     path
 }
 
-/// Packs a one-buffer glTF into GLB: header, JSON chunk, BIN chunk (glTF 2.0 §4.4).
-fn pack_glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
+/// Packs a one-buffer glTF document into GLB, its buffer pointing at the BIN chunk.
+fn glb_of(doc: &Value, bin: &[u8]) -> Vec<u8> {
     let mut doc = doc.clone();
     doc["buffers"] = json!([{ "byteLength": bin.len() }]);
-    let mut json_chunk = serde_json::to_vec(&doc).unwrap();
-    json_chunk.resize(json_chunk.len().next_multiple_of(4), b' ');
-    let mut bin_chunk = bin.to_vec();
-    bin_chunk.resize(bin_chunk.len().next_multiple_of(4), 0);
-    let total = 12 + 8 + json_chunk.len() + 8 + bin_chunk.len();
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json_chunk.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&json_chunk);
-    out.extend_from_slice(&(bin_chunk.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&bin_chunk);
-    out
+    pack_glb(&serde_json::to_vec(&doc).unwrap(), bin)
 }
 
 fn mesh_index(doc: &Value, name: &str) -> usize {
@@ -232,7 +220,7 @@ fn triangles_of(doc: &Value, mesh: &str) -> usize {
 fn truncated_glb() {
     let dir = temp_dir("truncated_glb");
     let points = points_csv(&dir);
-    let glb = pack_glb(&cornell_json(), &cornell_bin());
+    let glb = glb_of(&cornell_json(), &cornell_bin());
     // The whole file loads, so what fails below is the truncation alone.
     let whole = dir.join("cornell.glb");
     std::fs::write(&whole, &glb).unwrap();
@@ -734,7 +722,7 @@ fn gltf_names_are_escaped() {
     let path = write_gltf(&dir, "mesh_count", &count, &bin);
     expect_printable_error(&reference(&path, &points, &[]), &["mesh_count.gltf", shown]);
     let glb = dir.join("mesh_count.glb");
-    std::fs::write(&glb, pack_glb(&count, &bin)).unwrap();
+    std::fs::write(&glb, glb_of(&count, &bin)).unwrap();
     expect_printable_error(&reference(&glb, &points, &[]), &["mesh_count.glb", shown]);
     let mut nan = bin.clone();
     let at = element_offset(&doc, positions, 1, 12);

@@ -41,6 +41,9 @@
 //! that runs the failing loader's cases again; such a case then becomes a fixed case here
 //! (`exr_cases_that_failed_before`), since a short run's random cases need not come near it.
 
+mod common;
+
+use common::pack_glb;
 use proptest::prelude::*;
 use proptest::sample::Index;
 use proptest::test_runner::{Config, RngSeed, TestCaseError, TestRunner};
@@ -1293,26 +1296,6 @@ fn write_gltf_case(dir: &Path, text: &[u8], bin: &[u8]) -> PathBuf {
     let path = dir.join("case.gltf");
     std::fs::write(&path, text).unwrap();
     path
-}
-
-/// GLB: 12-byte header, JSON chunk padded with spaces, BIN chunk padded with zeros.
-fn pack_glb(json: &[u8], bin: &[u8]) -> Vec<u8> {
-    let mut json_chunk = json.to_vec();
-    json_chunk.resize(json_chunk.len().next_multiple_of(4), b' ');
-    let mut bin_chunk = bin.to_vec();
-    bin_chunk.resize(bin_chunk.len().next_multiple_of(4), 0);
-    let total = 12 + 8 + json_chunk.len() + 8 + bin_chunk.len();
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json_chunk.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&json_chunk);
-    out.extend_from_slice(&(bin_chunk.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&bin_chunk);
-    out
 }
 
 fn seed_index() -> impl Strategy<Value = Index> {

@@ -14,6 +14,9 @@
 //! standard errors), plus half-float rounding (2⁻¹¹ of each channel) and, where E
 //! varies, interpolation.
 
+mod common;
+
+use common::{locate, lookup};
 use std::f32::consts::PI;
 use std::path::Path;
 use std::sync::Arc;
@@ -66,24 +69,6 @@ fn estimator(
         floor,
         max_bounces: None,
     }
-}
-
-/// The surface a world point with normal `n` lies on: (triangle, barycentrics, front).
-fn locate(scene: &TracedScene, x: Vec3, n: Vec3) -> (u32, Vec2, bool) {
-    let p = scene
-        .locate(x, n)
-        .unwrap_or_else(|| panic!("{x} is on no surface"));
-    let front = p
-        .geometric_normal
-        .dot(scene.geometric_normals[p.triangle as usize])
-        > 0.0;
-    (p.triangle, p.uv, front)
-}
-
-/// A cache's irradiance at world point `x` on the side `n` looks at.
-fn lookup(cache: &dyn SurfaceCache, scene: &TracedScene, x: Vec3, n: Vec3) -> Vec3 {
-    let (t, uv, front) = locate(scene, x, n);
-    cache.lookup(t, uv, front)
 }
 
 /// Path-traced reference at the points, `samples` `best` samples each.

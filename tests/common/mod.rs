@@ -1,6 +1,6 @@
 //! Helpers shared by the root test binaries: scenes, complete bakes as the product runs
 //! them, lookups at world points, closed forms, the fast Cornell settings of the CLI tests
-//! and the check that a run of the `surfcache` binary succeeded.
+//! the check that a run of the `surfcache` binary succeeded, and GLB packing.
 #![allow(dead_code)]
 
 use std::f32::consts::PI;
@@ -165,4 +165,26 @@ pub fn expect_success(out: &Output, what: &str) {
         out.status,
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+/// Packs a JSON document and one binary buffer into a GLB (glTF 2.0, "GLB File Format
+/// Specification"): 12-byte header, JSON chunk padded with spaces, BIN chunk padded with
+/// zeros.
+pub fn pack_glb(json: &[u8], bin: &[u8]) -> Vec<u8> {
+    let mut json_chunk = json.to_vec();
+    json_chunk.resize(json_chunk.len().next_multiple_of(4), b' ');
+    let mut bin_chunk = bin.to_vec();
+    bin_chunk.resize(bin_chunk.len().next_multiple_of(4), 0);
+    let total = 12 + 8 + json_chunk.len() + 8 + bin_chunk.len();
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(json_chunk.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json_chunk);
+    out.extend_from_slice(&(bin_chunk.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&bin_chunk);
+    out
 }
