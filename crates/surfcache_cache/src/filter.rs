@@ -102,9 +102,13 @@ pub fn filter(input: &FilterInput, settings: &FilterSettings) -> (Vec<Vec3>, Vec
     }
     let mut next_value = value.clone();
     let mut next_variance = variance.clone();
+    let full_taps = 1.0 / b3_square_sum().powi(2);
     for k in 0..settings.iterations {
-        let step = 1isize << k;
-        let gain = correlation_gain(k);
+        let pass = Pass {
+            step: 1isize << k,
+            gain: correlation_gain(k),
+            full_taps,
+        };
         let (src_v, src_s) = (&value, &variance);
         next_value
             .par_chunks_mut(w)
@@ -116,7 +120,7 @@ pub fn filter(input: &FilterInput, settings: &FilterSettings) -> (Vec<Vec3>, Vec
                     if !input.valid[p] {
                         continue;
                     }
-                    let (v, s) = filter_texel(input, settings, src_v, src_s, x, y, step, gain);
+                    let (v, s) = filter_texel(input, settings, src_v, src_s, x, y, &pass);
                     row_v[x] = v;
                     row_s[x] = s;
                 }
@@ -127,11 +131,20 @@ pub fn filter(input: &FilterInput, settings: &FilterSettings) -> (Vec<Vec3>, Vec
     (value, variance)
 }
 
-/// Sum of squared weights of the 2-D B3 kernel (`(Σ h²)²`): the variance factor of one
-/// unconstrained pass over independent taps; its inverse is the taps' effective count.
+/// Σ h² of the 1-D B3 kernel; squared, the variance factor of one unconstrained 2-D pass
+/// over independent taps, whose inverse is the pass' effective count of taps.
 fn b3_square_sum() -> f32 {
-    let s: f32 = B3.iter().map(|h| h * h).sum();
-    s * s
+    B3.iter().map(|h| h * h).sum()
+}
+
+/// What one à-trous pass needs besides the texels.
+struct Pass {
+    /// Tap spacing in texels, `2^k` for pass `k`.
+    step: isize,
+    /// The pass' [`correlation_gain`].
+    gain: f32,
+    /// Effective taps of an unconstrained pass, `1/(Σ h²)²`.
+    full_taps: f32,
 }
 
 /// Correlation gain of à-trous pass `k` (steps 1, 2, 4, …; module docs): for i.i.d. input
@@ -144,7 +157,7 @@ pub fn correlation_gain(k: u32) -> f32 {
     // 1-D composite kernels of passes 0..k (without and with pass k).
     let mut composite = vec![1.0f64];
     let mut ratios = [1.0f64; 2];
-    let h1: f64 = B3.iter().map(|h| (*h as f64).powi(2)).sum();
+    let h1 = b3_square_sum() as f64;
     for pass in 0..=k.min(16) {
         let step = 1usize << pass;
         let mut next = vec![0.0f64; composite.len() + 4 * step];
@@ -160,11 +173,10 @@ pub fn correlation_gain(k: u32) -> f32 {
     ((ratios[1] / ratios[0]).powi(2)) as f32
 }
 
-/// One à-trous tap sum at texel (x, y) with step `step` (module docs); `gain` is the
-/// pass' [`correlation_gain`], applied in full where the texel shares as many taps as an
-/// unconstrained pass and not at all where it shares none.
+/// One à-trous tap sum at texel (x, y) for `pass` (module docs); the pass' correlation
+/// gain applies in full where the texel shares as many taps as an unconstrained pass and
+/// not at all where it shares none.
 #[inline]
-#[allow(clippy::too_many_arguments)]
 fn filter_texel(
     input: &FilterInput,
     settings: &FilterSettings,
@@ -172,9 +184,9 @@ fn filter_texel(
     variance: &[Vec3],
     x: usize,
     y: usize,
-    step: isize,
-    gain: f32,
+    pass: &Pass,
 ) -> (Vec3, Vec3) {
+    let step = pass.step;
     let (w, h) = (input.width as isize, input.height as isize);
     let p = y * input.width + x;
     let (xp, np) = (input.position[p], input.normal[p]);
@@ -225,9 +237,8 @@ fn filter_texel(
     }
     // Effective taps (Σw)²/Σw² against the unconstrained pass' 1/(Σh²)².
     let taps = sum_w * sum_w / sum_w2;
-    let full = 1.0 / b3_square_sum();
-    let share = ((taps - 1.0) / (full - 1.0)).clamp(0.0, 1.0);
-    let gain = 1.0 + (gain - 1.0) * share;
+    let share = ((taps - 1.0) / (pass.full_taps - 1.0)).clamp(0.0, 1.0);
+    let gain = 1.0 + (pass.gain - 1.0) * share;
     (sum_v / sum_w, gain * sum_s / (sum_w * sum_w))
 }
 
@@ -242,28 +253,39 @@ mod tests {
         (pos, vec![Vec3::Y; w * h])
     }
 
-    #[test]
-    fn noise_is_shared_and_variance_falls() {
-        let (w, h) = (32, 32);
+    /// Filters `value` with `variance` on a `w × h` plane of 0.1 texels, every texel valid.
+    fn filter_plane(
+        w: usize,
+        h: usize,
+        value: &[Vec3],
+        variance: &[Vec3],
+        settings: &FilterSettings,
+    ) -> (Vec<Vec3>, Vec<Vec3>) {
         let (pos, nrm) = plane(w, h);
-        let mut rng = surfcache_core::sampling::Rng::new(1, 2);
-        let value: Vec<Vec3> = (0..w * h)
-            .map(|_| Vec3::splat(1.0 + 0.1 * (rng.next_f32() - 0.5) * 3.46))
-            .collect();
-        let variance = vec![Vec3::splat(0.01); w * h];
         let valid = vec![true; w * h];
         let input = FilterInput {
             width: w,
             height: h,
-            value: &value,
-            variance: &variance,
+            value,
+            variance,
             position: &pos,
             normal: &nrm,
             valid: &valid,
             texel: 0.1,
             floor: 0.01,
         };
-        let (v, s) = filter(&input, &FilterSettings::default());
+        filter(&input, settings)
+    }
+
+    #[test]
+    fn noise_is_shared_and_variance_falls() {
+        let (w, h) = (32, 32);
+        let mut rng = surfcache_core::sampling::Rng::new(1, 2);
+        let value: Vec<Vec3> = (0..w * h)
+            .map(|_| Vec3::splat(1.0 + 0.1 * (rng.next_f32() - 0.5) * 3.46))
+            .collect();
+        let variance = vec![Vec3::splat(0.01); w * h];
+        let (v, s) = filter_plane(w, h, &value, &variance, &FilterSettings::default());
         let rms = |v: &[Vec3]| {
             (v.iter().map(|x| (x.x - 1.0).powi(2)).sum::<f32>() / v.len() as f32).sqrt()
         };
@@ -279,9 +301,7 @@ mod tests {
     /// many independent noise fields (the centre texel of a plane, far from the borders).
     fn claimed_and_measured_variance(settings: &FilterSettings) -> (f32, f32) {
         let (w, h) = (64, 64);
-        let (pos, nrm) = plane(w, h);
         let variance = vec![Vec3::splat(0.01); w * h];
-        let valid = vec![true; w * h];
         let centre = (h / 2) * w + w / 2;
         let (mut claimed, mut sum, mut sum_sq) = (0.0, 0.0, 0.0);
         let fields = 400;
@@ -291,18 +311,7 @@ mod tests {
             let value: Vec<Vec3> = (0..w * h)
                 .map(|_| Vec3::splat(1.0 + 0.1 * (rng.next_f32() - 0.5) * 12f32.sqrt()))
                 .collect();
-            let input = FilterInput {
-                width: w,
-                height: h,
-                value: &value,
-                variance: &variance,
-                position: &pos,
-                normal: &nrm,
-                valid: &valid,
-                texel: 0.1,
-                floor: 0.01,
-            };
-            let (v, s) = filter(&input, settings);
+            let (v, s) = filter_plane(w, h, &value, &variance, settings);
             claimed += s[centre].x as f64 / fields as f64;
             sum += v[centre].x as f64;
             sum_sq += (v[centre].x as f64).powi(2);
@@ -356,24 +365,11 @@ mod tests {
     fn a_resolved_edge_stays_sharp() {
         // Left half lit (E = 1), right half dark (E = 0.1), precise estimates.
         let (w, h) = (16, 8);
-        let (pos, nrm) = plane(w, h);
         let value: Vec<Vec3> = (0..w * h)
             .map(|k| Vec3::splat(if k % w < w / 2 { 1.0 } else { 0.1 }))
             .collect();
         let variance = vec![Vec3::splat(1e-4); w * h];
-        let valid = vec![true; w * h];
-        let input = FilterInput {
-            width: w,
-            height: h,
-            value: &value,
-            variance: &variance,
-            position: &pos,
-            normal: &nrm,
-            valid: &valid,
-            texel: 0.1,
-            floor: 0.01,
-        };
-        let (v, _) = filter(&input, &FilterSettings::default());
+        let (v, _) = filter_plane(w, h, &value, &variance, &FilterSettings::default());
         for (k, (a, b)) in v.iter().zip(&value).enumerate() {
             assert!(
                 (a.x - b.x).abs() < 1e-3 * b.x.max(0.1),
