@@ -841,10 +841,7 @@ impl TextEdit {
 // --- checking what loaded -------------------------------------------------------------------
 
 fn finite_texture(t: &surfcache::core::Texture) -> bool {
-    t.width > 0
-        && t.height > 0
-        && t.texels.len() == t.width as usize * t.height as usize
-        && t.texels.iter().all(|v: &Vec4| v.is_finite())
+    (0..t.height()).all(|j| (0..t.width()).all(|i| t.texel(i, j).is_finite()))
 }
 
 /// The first non-finite or inconsistent datum of a loaded scene.

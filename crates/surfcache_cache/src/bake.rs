@@ -188,8 +188,28 @@ pub struct BakeProgress {
     /// Hemisphere samples and rays so far.
     pub samples: u64,
     pub rays: u64,
+    /// Samples still to take, as far as they can be told: the budgets of the current
+    /// round's pending points and what the cache expects of later rounds
+    /// ([`SurfaceCache::later_samples`]); `None` where either is unknown.
+    pub samples_pending: Option<u64>,
     /// Whether the cache has converged.
     pub finished: bool,
+}
+
+impl BakeProgress {
+    /// Share of the bake done: by samples where the samples still to take are known
+    /// (a lightmap's later rounds hold most of its work in few points), else by points
+    /// of the current round.
+    pub fn fraction(&self) -> f32 {
+        if self.finished {
+            return 1.0;
+        }
+        let (done, left) = match self.samples_pending {
+            Some(pending) => (self.samples, pending),
+            None => (self.points_done, self.points_pending),
+        };
+        (done as f64 / (done + left).max(1) as f64) as f32
+    }
 }
 
 /// Drives a [`SurfaceCache`] through its rounds. [`Baker::step`] estimates a bounded
@@ -203,6 +223,8 @@ pub struct Baker<C: SurfaceCache> {
     gather: Option<Arc<dyn IrradianceLookup + Send>>,
     previous: Option<Previous>,
     round: Vec<SamplePoint>,
+    /// Sample budgets of the round's points not estimated yet (`None` if one has none).
+    round_budget: Option<u64>,
     estimates: Vec<Estimate>,
     progress: BakeProgress,
 }
@@ -219,6 +241,7 @@ impl<C: SurfaceCache> Baker<C> {
             gather: None,
             previous: None,
             round: Vec::new(),
+            round_budget: None,
             estimates: Vec::new(),
             progress: BakeProgress::default(),
         }
@@ -251,6 +274,11 @@ impl<C: SurfaceCache> Baker<C> {
             self.round.clear();
             self.estimates.clear();
             self.cache.next_round(scene, &mut self.round);
+            self.round_budget = self
+                .round
+                .iter()
+                .map(|p| p.budget.map(u64::from))
+                .sum::<Option<u64>>();
             if self.round.is_empty() {
                 self.progress.finished = true;
                 self.progress.points_pending = 0;
@@ -314,6 +342,16 @@ impl<C: SurfaceCache> Baker<C> {
         self.progress.points_done += batch.len() as u64;
         self.estimates.extend(batch);
         self.progress.points_pending = (self.round.len() - self.estimates.len()) as u64;
+        if let Some(left) = &mut self.round_budget {
+            *left -= self.round[start..end]
+                .iter()
+                .map(|p| p.budget.unwrap_or(0) as u64)
+                .sum::<u64>();
+        }
+        self.progress.samples_pending = self
+            .round_budget
+            .zip(self.cache.later_samples())
+            .map(|(round, later)| round + later);
         false
     }
 
@@ -468,9 +506,44 @@ pub struct JobProgress {
     pub rays: u64,
     /// Whether the final cache is complete.
     pub finished: bool,
+    /// Expected work in units of the final pass (0 where a job does not weigh its
+    /// passes: they then count alike): of the passes finished, of the running one, and
+    /// of all passes including those still to come.
+    pub work_done: f32,
+    pub work_running: f32,
+    pub work_total: f32,
 }
 
 impl JobProgress {
+    /// Share of the job done: finished passes and the running pass' share of its own
+    /// work ([`BakeProgress::fraction`]), each pass weighed by its expected work.
+    ///
+    /// ```
+    /// use surfcache_cache::bake::{BakeProgress, JobProgress};
+    /// let p = JobProgress {
+    ///     pass: 1,
+    ///     passes: 2,
+    ///     current: BakeProgress { samples: 30, samples_pending: Some(10), ..Default::default() },
+    ///     work_done: 0.25,
+    ///     work_running: 1.0,
+    ///     work_total: 1.25,
+    ///     ..Default::default()
+    /// };
+    /// assert!((p.fraction() - 0.8).abs() < 1e-6);
+    /// ```
+    pub fn fraction(&self) -> f32 {
+        if self.finished {
+            return 1.0;
+        }
+        let running = self.current.fraction();
+        let f = if self.work_total > 0.0 {
+            (self.work_done + self.work_running * running) / self.work_total
+        } else {
+            (self.pass as f32 + running) / self.passes.max(1) as f32
+        };
+        f.clamp(0.0, 1.0)
+    }
+
     /// These figures of finished passes together with pass `pass` running in `baker`.
     pub(crate) fn with_running<C: SurfaceCache>(
         mut self,
@@ -575,6 +648,9 @@ pub struct BakeJob {
     /// Energy each finished bounce pass added (`a_k`, module docs).
     added: Vec<f64>,
     probes: Vec<(u32, Vec2, bool)>,
+    /// The settings and an unbaked copy of the last cache laid out: bounce passes share
+    /// one layout (a Sponza atlas takes seconds to make).
+    layout: Option<(CacheSettings, Cache)>,
 }
 
 impl BakeJob {
@@ -594,6 +670,7 @@ impl BakeJob {
             passes: Vec::new(),
             added: Vec::new(),
             probes: Vec::new(),
+            layout: None,
         }
     }
 
@@ -657,7 +734,18 @@ impl BakeJob {
         } else {
             s.seed ^ splitmix64(0x6761_7468_6572 + k as u64)
         };
-        let mut baker = Baker::new(Cache::new(scene, &cache_settings), estimator, seed);
+        let cache = match &self.layout {
+            Some((settings, fresh)) if *settings == cache_settings => fresh.clone(),
+            _ => {
+                let fresh = Cache::new(scene, &cache_settings);
+                self.layout = (!self.final_pass).then(|| (cache_settings, fresh.clone()));
+                fresh
+            }
+        };
+        if self.final_pass {
+            self.layout = None;
+        }
+        let mut baker = Baker::new(cache, estimator, seed);
         if let Some(prev) = self.passes.last().cloned() {
             baker = baker.with_gather(prev);
         }
@@ -750,10 +838,39 @@ impl BakeJob {
         false
     }
 
-    /// Progress so far.
+    /// Progress so far, passes weighed by their expected work: a bounce pass
+    /// [`Self::bounce_pass_work`] of the final one, and one more bounce pass expected
+    /// after the running one until the series converges or the passes run out.
     pub fn progress(&self) -> JobProgress {
-        self.done
-            .with_running(self.passes.len() as u32, self.baker.as_ref())
+        let mut p = self
+            .done
+            .with_running(self.passes.len() as u32, self.baker.as_ref());
+        let bounce = self.bounce_pass_work();
+        let finished = self.passes.len() as f32;
+        p.work_done = finished * bounce;
+        p.work_running = if self.final_pass { 1.0 } else { bounce };
+        let to_come = if self.final_pass {
+            0.0
+        } else {
+            let more = (self.passes.len() as u32 + 1) < self.most_bounce_passes();
+            1.0 + if more { bounce } else { 0.0 }
+        };
+        p.work_total = p.work_done + p.work_running + to_come;
+        p
+    }
+
+    /// A bounce pass' work relative to the final pass: its share of the final cache's
+    /// points ([`BOUNCE_PASS_DENSITY`]² where the cache has a density) times its share of
+    /// the samples per point ([`bounce_pass_estimator`]).
+    fn bounce_pass_work(&self) -> f32 {
+        let s = &self.settings;
+        let points = match s.cache.density() {
+            Some(_) => BOUNCE_PASS_DENSITY * BOUNCE_PASS_DENSITY,
+            None => 1.0,
+        };
+        let bounce = bounce_pass_estimator(1, &s.estimator);
+        let samples = bounce.min_samples.max(1) as f32 / s.estimator.min_samples.max(1) as f32;
+        points * samples.min(1.0)
     }
 
     /// Every pass's cache and the settings, once [`Self::step`] returned true.

@@ -158,6 +158,12 @@ pub trait SurfaceCache: Send + Sync {
     /// cache has converged.
     fn next_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>);
 
+    /// Samples the cache expects to ask for in the rounds after the one it last handed
+    /// out, if it can tell (progress reports use it; `None` leaves them counting points).
+    fn later_samples(&self) -> Option<u64> {
+        None
+    }
+
     /// Takes the estimates of the points the last [`Self::next_round`] produced, in the
     /// same order.
     fn finish_round(&mut self, scene: &TracedScene, points: &[SamplePoint], estimates: &[Estimate]);
@@ -376,6 +382,10 @@ impl SurfaceCache for Cache {
 
     fn next_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>) {
         self.inner_mut().next_round(scene, points)
+    }
+
+    fn later_samples(&self) -> Option<u64> {
+        self.inner().later_samples()
     }
 
     fn finish_round(

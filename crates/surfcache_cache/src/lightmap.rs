@@ -140,6 +140,11 @@ pub struct Lightmaps {
     rounds: u32,
     #[serde(skip)]
     pending: Vec<(u32, u32)>,
+    /// Samples the rounds after the next are expected to take
+    /// ([`SurfaceCache::later_samples`]); before the first round's estimates arrive,
+    /// [`LATER_ROUNDS_GUESS`] times the first round.
+    #[serde(skip)]
+    later_samples: u64,
     /// Every round's estimates merged per slot while baking.
     #[serde(skip)]
     merged: Vec<TexelEstimate>,
@@ -236,6 +241,7 @@ impl Lightmaps {
             plan: None,
             rounds: 0,
             pending: Vec::new(),
+            later_samples: 0,
             merged: Vec::new(),
             state: Vec::new(),
             guide: Vec::new(),
@@ -328,6 +334,11 @@ impl Lightmaps {
         &self.packed[start..start + m.texels()]
     }
 }
+
+/// Before any estimate is in, a lightmap's progress report expects its later rounds to
+/// take this many times the samples of the first; the guess is replaced by a prediction
+/// once the first round is in.
+pub const LATER_ROUNDS_GUESS: f32 = 2.0;
 
 /// How a lightmap plans its rounds of samples (module docs, Rounds), from the bake's
 /// estimator settings.
@@ -1086,6 +1097,7 @@ impl SurfaceCache for Lightmaps {
             _ => None,
         };
         self.probe_crossings(scene);
+        let first = points.len();
         for layer in 0..self.layers {
             for m in &self.maps {
                 for i in m.offset..m.offset + m.texels() {
@@ -1097,6 +1109,13 @@ impl SurfaceCache for Lightmaps {
                 }
             }
         }
+        self.later_samples = budget.map_or(0, |b| {
+            (LATER_ROUNDS_GUESS * b as f32 * (points.len() - first) as f32) as u64
+        });
+    }
+
+    fn later_samples(&self) -> Option<u64> {
+        Some(self.later_samples)
     }
 
     /// Merges the round's estimates into their texels, marks buried ones (first round),
@@ -1148,15 +1167,22 @@ impl SurfaceCache for Lightmaps {
             self.pending
                 .extend(moved.iter().map(|&slot| (slot, plan.first)));
         }
+        self.later_samples = 0;
         if let Some(plan) = plan.filter(|p| p.bound > 0.0) {
             for (slot, (e, (v, s))) in self.merged.iter().zip(&filtered).enumerate() {
-                if self.state[slot] == Burial::Valid
-                    && e.samples > 0
-                    && e.samples < plan.max
-                    && plan.relative_error(*v, *s) > plan.bound
-                {
-                    self.pending
-                        .push((slot as u32, e.samples.min(plan.max - e.samples)));
+                if self.state[slot] != Burial::Valid || e.samples == 0 || e.samples >= plan.max {
+                    continue;
+                }
+                let error = plan.relative_error(*v, *s);
+                if error > plan.bound {
+                    // Double the samples; σ² falls like 1/n, so about n·(C/bound)² in all
+                    // would meet the bound: what that needs beyond this round is the
+                    // progress report's guess of the later rounds.
+                    let more = e.samples.min(plan.max - e.samples);
+                    let needed = (e.samples as f32 * (error / plan.bound).powi(2))
+                        .min(plan.max as f32) as u64;
+                    self.later_samples += needed.saturating_sub((e.samples + more) as u64);
+                    self.pending.push((slot as u32, more));
                 }
             }
         }

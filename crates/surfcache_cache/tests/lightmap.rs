@@ -661,8 +661,8 @@ fn large_instances_shrink_to_the_maximum_size() {
     assert!(d < 5.12 && d > 4.5, "{d}");
 }
 
-#[test]
-fn same_seed_gives_identical_texels_whatever_the_batches() {
+/// A 2 m floor (albedo 0.5) pierced by a box (albedo 0.7) under a coloured sky.
+fn floor_with_box() -> TracedScene {
     let instances = vec![
         instance(floor_quad(1.0), 0.5, Affine3A::IDENTITY),
         instance(
@@ -676,7 +676,12 @@ fn same_seed_gives_identical_texels_whatever_the_batches() {
             Affine3A::IDENTITY,
         ),
     ];
-    let traced = scene(instances, Vec3::new(1.0, 0.8, 0.6));
+    scene(instances, Vec3::new(1.0, 0.8, 0.6))
+}
+
+#[test]
+fn same_seed_gives_identical_texels_whatever_the_batches() {
+    let traced = floor_with_box();
     let bake = |batch: usize| {
         let cache = Lightmaps::new(&traced, settings(12.0));
         let mut baker = Baker::new(cache, estimator(0.02), 21);
@@ -688,4 +693,35 @@ fn same_seed_gives_identical_texels_whatever_the_batches() {
     let (ta, tb) = (a.publish(&traced), b.publish(&traced));
     assert_eq!(ta, tb);
     assert!(ta[0].texels.iter().any(|v| v.max_element() > 0.0));
+}
+
+/// A lightmap's later rounds hold most of its samples in few points: progress counts
+/// samples, known for every round (its budgets and the cache's guess of the rounds
+/// after), stays within [0, 1], ends at 1, and the samples it expected at the first
+/// round are within a factor of the samples taken.
+#[test]
+fn progress_counts_samples_across_rounds() {
+    let traced = floor_with_box();
+    let cache = Lightmaps::new(&traced, settings(12.0));
+    let mut baker = Baker::new(cache, estimator(0.02), 3);
+    let mut first_guess = None;
+    let mut rounds_seen = 0;
+    while !baker.step(&traced, 64) {
+        let p = *baker.progress();
+        let pending = p
+            .samples_pending
+            .expect("lightmaps know their samples to come");
+        first_guess.get_or_insert(p.samples + pending);
+        let f = p.fraction();
+        assert!((0.0..=1.0).contains(&f), "{f}");
+        rounds_seen = rounds_seen.max(p.rounds);
+    }
+    let p = *baker.progress();
+    assert_eq!(p.fraction(), 1.0);
+    assert!(rounds_seen >= 1, "the bound needed more than one round");
+    let guess = first_guess.unwrap() as f64 / p.samples as f64;
+    assert!(
+        (0.25..4.0).contains(&guess),
+        "first guess {guess} of the samples taken"
+    );
 }

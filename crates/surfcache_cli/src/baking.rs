@@ -180,10 +180,11 @@ impl Progress {
         match self {
             Progress::Bar(bar) => {
                 bar.set_message(format!(
-                    "pass {}/{} round {}: {} points done, {} pending, {:.1} Mrays/s{eta}",
+                    "pass {}/{} round {}: {:.1} % done, {} points done, {} pending, {:.1} Mrays/s{eta}",
                     p.pass + 1,
                     p.passes.max(1),
                     p.current.rounds + 1,
+                    100.0 * status.fraction,
                     p.current.points_done,
                     p.current.points_pending,
                     status.rays_per_second / 1e6,

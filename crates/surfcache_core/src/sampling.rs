@@ -125,6 +125,11 @@ pub fn uniform_sphere(u: Vec2) -> Vec3 {
 /// A piecewise-constant distribution over `n` bins of [0, 1) with probabilities
 /// proportional to non-negative weights (pbrt-v4 §A.1, `PiecewiseConstant1D`).
 ///
+/// Sampling inverts the cdf through a guide table (the cutpoint method, Chen and Asau
+/// 1974): for each of G = 2^⌈log₂ n⌉ equal slices of [0, 1) it holds the first bin the
+/// slice can fall in, so a sample searches only the bins of its slice (about one)
+/// instead of all n; the answer is the one a binary search over the whole cdf gives.
+///
 /// ```
 /// use surfcache_core::sampling::Distribution1D;
 /// let d = Distribution1D::new(&[1.0, 3.0]);
@@ -137,6 +142,9 @@ pub struct Distribution1D {
     cdf: Vec<f32>,
     /// Σ w (0 when every weight is zero: the distribution is then uniform).
     total: f64,
+    /// guide[g] = the first bin whose upper cdf exceeds g / G, for g = 0..=G (G a power
+    /// of two, so that g / G and u · G are exact in f32).
+    guide: Vec<u32>,
 }
 
 impl Distribution1D {
@@ -164,7 +172,11 @@ impl Distribution1D {
                 (acc / denom) as f32
             });
         }
-        Self { cdf, total }
+        let slices = n.next_power_of_two();
+        let guide = (0..=slices)
+            .map(|g| first_above(&cdf, g as f32 / slices as f32) as u32)
+            .collect();
+        Self { cdf, total, guide }
     }
 
     /// Number of bins.
@@ -193,8 +205,20 @@ impl Distribution1D {
     #[inline]
     pub fn sample(&self, u: f32) -> (usize, f32, f32) {
         let n = self.len();
-        // First bin whose upper cdf exceeds u, skipping zero-probability bins.
-        let i = self.cdf[1..].partition_point(|&c| c <= u).min(n - 1);
+        // First bin whose upper cdf exceeds u (skipping zero-probability bins), searched
+        // between the guides of u's slice: u ∈ [g/G, (g+1)/G) lies in bins guide[g] ..=
+        // guide[g+1].
+        let slices = self.guide.len() - 1;
+        let g = ((u * slices as f32) as usize).min(slices - 1);
+        let (first, last) = (
+            self.guide[g] as usize,
+            (self.guide[g + 1] as usize).min(n - 1),
+        );
+        let i = if first >= last {
+            first.min(n - 1)
+        } else {
+            (first + self.cdf[first + 1..=last + 1].partition_point(|&c| c <= u)).min(n - 1)
+        };
         let (lo, hi) = (self.cdf[i], self.cdf[i + 1]);
         let pmf = hi - lo;
         let remapped = if pmf > 0.0 {
@@ -204,6 +228,11 @@ impl Distribution1D {
         };
         (i, pmf, remapped)
     }
+}
+
+/// The first bin i whose upper cdf `cdf[i + 1]` exceeds `u` (n when none does).
+fn first_above(cdf: &[f32], u: f32) -> usize {
+    cdf[1..].partition_point(|&c| c <= u)
 }
 
 /// The largest f32 below 1.
@@ -327,6 +356,32 @@ mod tests {
         assert!((share - 0.75).abs() < 0.01, "{share}");
         let uniform = Distribution1D::new(&[0.0, 0.0]);
         assert_eq!(uniform.pmf(0), 0.5);
+    }
+
+    #[test]
+    fn guide_table_gives_the_bin_of_a_full_search() {
+        // Skewed weights with runs of zeros (a sun in a dark sky), sizes that are and are
+        // not powers of two, u at bin edges and slice edges.
+        let mut rng = Rng::new(9, 1);
+        for n in [1usize, 2, 3, 7, 64, 100, 1000] {
+            let weights: Vec<f32> = (0..n)
+                .map(|i| match i % 7 {
+                    0 | 3 => 0.0,
+                    5 => 1e4 * rng.next_f32(),
+                    _ => rng.next_f32(),
+                })
+                .collect();
+            let d = Distribution1D::new(&weights);
+            let mut us: Vec<f32> = (0..5000).map(|_| rng.next_f32()).collect();
+            us.extend(d.cdf.iter().copied().filter(|&c| c < 1.0));
+            let slices = n.next_power_of_two();
+            us.extend((0..slices).map(|g| g as f32 / slices as f32));
+            us.push(ONE_MINUS_EPSILON);
+            for u in us {
+                let full = first_above(&d.cdf, u).min(n - 1);
+                assert_eq!(d.sample(u).0, full, "n {n} u {u}");
+            }
+        }
     }
 
     #[test]

@@ -215,32 +215,121 @@ impl Mesh {
     }
 }
 
-/// A linear-RGBA texture (sRGB images are decoded to linear on load).
+/// A linear-RGBA texture, read with glTF's default sampler (bilinear, repeat).
+///
+/// 8-bit images keep their encoded bytes (4 per texel instead of 16: game textures are
+/// what a bake's hit points read most, and at a quarter of the memory far more of them
+/// stay in the caches); a lookup decodes colour through the exact sRGB curve
+/// ([`crate::color::srgb_to_linear`], tabulated) and alpha as `a / 255`. Deeper images are
+/// decoded to linear on load.
+///
+/// ```
+/// use surfcache_core::Texture;
+/// let t = Texture::from_srgb8(1, 1, vec![[255, 188, 0, 128]]).unwrap();
+/// let c = t.sample(glam::Vec2::new(0.3, 0.7));
+/// assert!((c.x - 1.0).abs() < 1e-6 && (c.y - 0.5).abs() < 3e-3 && c.z == 0.0);
+/// assert_eq!(c.w, 128.0 / 255.0);
+/// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct Texture {
-    pub width: u32,
-    pub height: u32,
+    width: u32,
+    height: u32,
     /// Row-major, row 0 at the top (glTF UV (0,0) is the image's top-left).
-    pub texels: Vec<Vec4>,
+    texels: Texels,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+enum Texels {
+    /// sRGB-encoded colour, linear alpha.
+    Srgb8(Vec<[u8; 4]>),
+    Linear(Vec<Vec4>),
 }
 
 impl Texture {
-    /// Bilinear lookup with repeat wrapping, glTF's default sampler.
-    pub fn sample(&self, uv: Vec2) -> Vec4 {
+    /// A texture of sRGB-encoded 8-bit colour and linear 8-bit alpha; `None` unless
+    /// `texels` holds `width × height > 0` texels.
+    pub fn from_srgb8(width: u32, height: u32, texels: Vec<[u8; 4]>) -> Option<Self> {
+        Self::checked(width, height, texels.len(), Texels::Srgb8(texels))
+    }
+
+    /// A texture of linear RGBA; `None` unless `texels` holds `width × height > 0`
+    /// texels.
+    pub fn from_linear(width: u32, height: u32, texels: Vec<Vec4>) -> Option<Self> {
+        Self::checked(width, height, texels.len(), Texels::Linear(texels))
+    }
+
+    fn checked(width: u32, height: u32, len: usize, texels: Texels) -> Option<Self> {
+        let count = width as usize * height as usize;
+        (count > 0 && len == count).then_some(Self {
+            width,
+            height,
+            texels,
+        })
+    }
+
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Linear RGBA of texel `(i, j)` (column, row from the top); `i < width`, `j < height`.
+    #[inline]
+    pub fn texel(&self, i: u32, j: u32) -> Vec4 {
+        let k = j as usize * self.width as usize + i as usize;
+        match &self.texels {
+            Texels::Srgb8(t) => {
+                let [r, g, b, a] = t[k];
+                let lut = crate::color::srgb8_to_linear();
+                Vec4::new(
+                    lut[r as usize],
+                    lut[g as usize],
+                    lut[b as usize],
+                    a as f32 / 255.0,
+                )
+            }
+            Texels::Linear(t) => t[k],
+        }
+    }
+
+    /// The four texels and weights of a bilinear lookup at `uv` with repeat wrapping.
+    #[inline]
+    fn footprint(&self, uv: Vec2) -> ([(u32, u32); 4], f32, f32) {
         let x = uv.x * self.width as f32 - 0.5;
         let y = uv.y * self.height as f32 - 0.5;
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = (x - x0, y - y0);
         let (w, h) = (self.width as i64, self.height as i64);
         // Non-finite UVs saturate to i64::MIN/MAX under `as`; rem_euclid keeps them in range.
-        let i0 = (x0 as i64).rem_euclid(w) as usize;
-        let i1 = (x0 as i64).wrapping_add(1).rem_euclid(w) as usize;
-        let j0 = (y0 as i64).rem_euclid(h) as usize;
-        let j1 = (y0 as i64).wrapping_add(1).rem_euclid(h) as usize;
-        let wu = self.width as usize;
-        let t = |i: usize, j: usize| self.texels[j * wu + i];
-        let top = t(i0, j0) * (1.0 - fx) + t(i1, j0) * fx;
-        let bottom = t(i0, j1) * (1.0 - fx) + t(i1, j1) * fx;
+        let i0 = (x0 as i64).rem_euclid(w) as u32;
+        let i1 = (x0 as i64).wrapping_add(1).rem_euclid(w) as u32;
+        let j0 = (y0 as i64).rem_euclid(h) as u32;
+        let j1 = (y0 as i64).wrapping_add(1).rem_euclid(h) as u32;
+        ([(i0, j0), (i1, j0), (i0, j1), (i1, j1)], fx, fy)
+    }
+
+    /// Bilinear lookup with repeat wrapping, glTF's default sampler.
+    #[inline]
+    pub fn sample(&self, uv: Vec2) -> Vec4 {
+        let ([a, b, c, d], fx, fy) = self.footprint(uv);
+        let t = |(i, j): (u32, u32)| self.texel(i, j);
+        let top = t(a) * (1.0 - fx) + t(b) * fx;
+        let bottom = t(c) * (1.0 - fx) + t(d) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+
+    /// The alpha channel of [`Self::sample`] alone (what an alpha test reads).
+    #[inline]
+    pub fn sample_alpha(&self, uv: Vec2) -> f32 {
+        let ([a, b, c, d], fx, fy) = self.footprint(uv);
+        let t = |(i, j): (u32, u32)| match &self.texels {
+            Texels::Srgb8(t) => t[j as usize * self.width as usize + i as usize][3] as f32 / 255.0,
+            Texels::Linear(t) => t[j as usize * self.width as usize + i as usize].w,
+        };
+        let top = t(a) * (1.0 - fx) + t(b) * fx;
+        let bottom = t(c) * (1.0 - fx) + t(d) * fx;
         top * (1.0 - fy) + bottom * fy
     }
 }
@@ -330,7 +419,7 @@ impl Material {
         match self.alpha_mode {
             AlphaMode::Mask(cutoff) => {
                 let a = match &self.albedo_texture {
-                    Some(t) => self.alpha * t.sample(uv0).w,
+                    Some(t) => self.alpha * t.sample_alpha(uv0),
                     None => self.alpha,
                 };
                 a >= cutoff

@@ -230,14 +230,7 @@ impl Run {
 
     fn status(&self, progress: &JobProgress) -> BakeStatus {
         let seconds = self.started.elapsed().as_secs_f64();
-        let passes = progress.passes.max(1) as f32;
-        let current = &progress.current;
-        let total = (current.points_done + current.points_pending).max(1) as f32;
-        let fraction = if progress.finished {
-            1.0
-        } else {
-            ((progress.pass as f32 + current.points_done as f32 / total) / passes).clamp(0.0, 1.0)
-        };
+        let fraction = progress.fraction();
         BakeStatus {
             running: !progress.finished,
             generation: self.generation,

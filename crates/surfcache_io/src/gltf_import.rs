@@ -17,6 +17,7 @@ use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
 use std::sync::Arc;
+use surfcache_core::color::srgb_to_linear;
 use surfcache_core::glam::{Affine3A, Mat4, Vec2, Vec3, Vec4};
 use surfcache_core::{AlphaMode, Environment, Instance, Light, Material, Mesh, Scene, Texture};
 
@@ -661,15 +662,6 @@ fn convert_material(
     })
 }
 
-/// The exact sRGB EOTF (IEC 61966-2-1) of an encoded value in [0, 1].
-fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
 /// Decodes image `index` (PNG or JPEG, from a file, data URI or buffer view) into a
 /// linear-RGBA texture; colour channels are sRGB-decoded, alpha is kept linear.
 fn decode_image(
@@ -771,18 +763,31 @@ fn to_texture(data: &gltf::image::Data) -> Result<Texture, String> {
             count * channels * bytes_per
         ));
     }
-    let lut8: Vec<f32> = (0..256).map(|v| srgb_to_linear(v as f32 / 255.0)).collect();
     let px = &data.pixels;
+    let invalid = || format!("decoded {w}×{h} image is empty");
+    if bytes_per == 1 {
+        // Encoded bytes as they are; the texture decodes them on lookup.
+        let texels = (0..count)
+            .map(|i| {
+                let k = i * channels;
+                match channels {
+                    1 => [px[k], px[k], px[k], 255],
+                    2 => [px[k], px[k], px[k], px[k + 1]],
+                    3 => [px[k], px[k + 1], px[k + 2], 255],
+                    _ => [px[k], px[k + 1], px[k + 2], px[k + 3]],
+                }
+            })
+            .collect();
+        return Texture::from_srgb8(w, h, texels).ok_or_else(invalid);
+    }
     let value = |k: usize| -> f32 {
         match bytes_per {
-            1 => px[k] as f32 / 255.0,
             2 => u16::from_le_bytes([px[2 * k], px[2 * k + 1]]) as f32 / 65535.0,
             _ => f32::from_le_bytes([px[4 * k], px[4 * k + 1], px[4 * k + 2], px[4 * k + 3]]),
         }
     };
     let colour = |k: usize| -> f32 {
         match bytes_per {
-            1 => lut8[px[k] as usize],
             2 => srgb_to_linear(value(k)),
             _ => value(k),
         }
@@ -798,11 +803,7 @@ fn to_texture(data: &gltf::image::Data) -> Result<Texture, String> {
             }
         })
         .collect();
-    Ok(Texture {
-        width: w,
-        height: h,
-        texels,
-    })
+    Texture::from_linear(w, h, texels).ok_or_else(invalid)
 }
 
 /// A light definition placed by a node's world transform → world-space [`Light`].
@@ -882,18 +883,5 @@ fn unique_name(taken: &mut HashSet<String>, name: String) -> String {
             return candidate;
         }
         k += 1;
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn srgb_eotf_endpoints_and_knee() {
-        assert_eq!(srgb_to_linear(0.0), 0.0);
-        assert!((srgb_to_linear(1.0) - 1.0).abs() < 1e-6);
-        assert!((srgb_to_linear(0.5) - 0.21404).abs() < 1e-4);
-        assert!((srgb_to_linear(0.04045) - 0.04045 / 12.92).abs() < 1e-9);
     }
 }
