@@ -54,7 +54,7 @@ use std::fmt::Debug;
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard, Once, OnceLock, PoisonError};
 use std::time::Instant;
-use surfcache::core::glam::{Vec2, Vec3, Vec4};
+use surfcache::core::glam::{Vec2, Vec3};
 use surfcache::core::{AlphaMode, Light, Scene};
 
 const ASSETS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
