@@ -533,6 +533,43 @@ mod tests {
     use super::*;
 
     #[test]
+    fn textures_check_their_size_and_read_both_stores_alike() {
+        assert!(Texture::from_srgb8(2, 2, vec![[0; 4]; 3]).is_none());
+        assert!(Texture::from_linear(0, 0, Vec::new()).is_none());
+        let bytes: Vec<[u8; 4]> = (0..12u8)
+            .map(|k| [k * 20, 255 - k * 20, k * 7, k * 21])
+            .collect();
+        let lut = crate::color::srgb8_to_linear();
+        let decoded: Vec<Vec4> = bytes
+            .iter()
+            .map(|b| {
+                Vec4::new(
+                    lut[b[0] as usize],
+                    lut[b[1] as usize],
+                    lut[b[2] as usize],
+                    b[3] as f32 / 255.0,
+                )
+            })
+            .collect();
+        let encoded = Texture::from_srgb8(4, 3, bytes).unwrap();
+        let linear = Texture::from_linear(4, 3, decoded).unwrap();
+        // A texel centre reads that texel; any UV (wrapped, negative) reads the same from
+        // either store, and the alpha-only lookup equals the full lookup's alpha.
+        assert_eq!(
+            encoded.sample(Vec2::new(2.5 / 4.0, 1.5 / 3.0)),
+            linear.texel(2, 1)
+        );
+        let mut x = 0.1234f32;
+        for _ in 0..200 {
+            x = (x * 997.13).fract();
+            let uv = Vec2::new(x * 5.0 - 2.0, (x * 31.7).fract() * 3.0 - 1.0);
+            assert_eq!(encoded.sample(uv), linear.sample(uv));
+            assert_eq!(encoded.sample_alpha(uv), encoded.sample(uv).w);
+            assert_eq!(linear.sample_alpha(uv), linear.sample(uv).w);
+        }
+    }
+
+    #[test]
     fn validate_names_bad_vertex() {
         let mut m = Mesh::new("m", vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]);
         m.positions[1].y = f32::NAN;
