@@ -734,16 +734,12 @@ impl BakeJob {
         } else {
             s.seed ^ splitmix64(0x6761_7468_6572 + k as u64)
         };
-        let cache = match &self.layout {
-            Some((settings, fresh)) if *settings == cache_settings => fresh.clone(),
-            _ => {
-                let fresh = Cache::new(scene, &cache_settings);
-                self.layout = (!self.final_pass).then(|| (cache_settings, fresh.clone()));
-                fresh
-            }
+        let cache = match self.layout.take() {
+            Some((settings, fresh)) if settings == cache_settings => fresh,
+            _ => Cache::new(scene, &cache_settings),
         };
-        if self.final_pass {
-            self.layout = None;
+        if !self.final_pass {
+            self.layout = Some((cache_settings, cache.clone()));
         }
         let mut baker = Baker::new(cache, estimator, seed);
         if let Some(prev) = self.passes.last().cloned() {

@@ -1097,7 +1097,6 @@ impl SurfaceCache for Lightmaps {
             _ => None,
         };
         self.probe_crossings(scene);
-        let first = points.len();
         for layer in 0..self.layers {
             for m in &self.maps {
                 for i in m.offset..m.offset + m.texels() {
@@ -1110,7 +1109,7 @@ impl SurfaceCache for Lightmaps {
             }
         }
         self.later_samples = budget.map_or(0, |b| {
-            (LATER_ROUNDS_GUESS * b as f32 * (points.len() - first) as f32) as u64
+            (LATER_ROUNDS_GUESS * b as f32 * self.slots.len() as f32) as u64
         });
     }
 

@@ -214,11 +214,7 @@ impl Distribution1D {
             self.guide[g] as usize,
             (self.guide[g + 1] as usize).min(n - 1),
         );
-        let i = if first >= last {
-            first.min(n - 1)
-        } else {
-            (first + self.cdf[first + 1..=last + 1].partition_point(|&c| c <= u)).min(n - 1)
-        };
+        let i = (first + self.cdf[first + 1..=last + 1].partition_point(|&c| c <= u)).min(n - 1);
         let (lo, hi) = (self.cdf[i], self.cdf[i + 1]);
         let pmf = hi - lo;
         let remapped = if pmf > 0.0 {

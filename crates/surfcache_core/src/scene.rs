@@ -278,7 +278,7 @@ impl Texture {
     /// Linear RGBA of texel `(i, j)` (column, row from the top); `i < width`, `j < height`.
     #[inline]
     pub fn texel(&self, i: u32, j: u32) -> Vec4 {
-        let k = j as usize * self.width as usize + i as usize;
+        let k = self.index(i, j);
         match &self.texels {
             Texels::Srgb8(t) => {
                 let [r, g, b, a] = t[k];
@@ -292,6 +292,12 @@ impl Texture {
             }
             Texels::Linear(t) => t[k],
         }
+    }
+
+    /// Row-major index of texel `(i, j)`.
+    #[inline]
+    fn index(&self, i: u32, j: u32) -> usize {
+        j as usize * self.width as usize + i as usize
     }
 
     /// The four texels and weights of a bilinear lookup at `uv` with repeat wrapping.
@@ -325,8 +331,8 @@ impl Texture {
     pub fn sample_alpha(&self, uv: Vec2) -> f32 {
         let ([a, b, c, d], fx, fy) = self.footprint(uv);
         let t = |(i, j): (u32, u32)| match &self.texels {
-            Texels::Srgb8(t) => t[j as usize * self.width as usize + i as usize][3] as f32 / 255.0,
-            Texels::Linear(t) => t[j as usize * self.width as usize + i as usize].w,
+            Texels::Srgb8(t) => t[self.index(i, j)][3] as f32 / 255.0,
+            Texels::Linear(t) => t[self.index(i, j)].w,
         };
         let top = t(a) * (1.0 - fx) + t(b) * fx;
         let bottom = t(c) * (1.0 - fx) + t(d) * fx;
