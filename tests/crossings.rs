@@ -321,13 +321,11 @@ fn a_prop_piercing_a_wall_lightmap() {
 }
 
 #[test]
-#[ignore = "issue #12: irradiance maps interpolate across the crossing (docs/results.md)"]
 fn a_wall_piercing_a_floor_at_an_angle_irradiance_maps() {
     check_contacts(&leaning_wall(), &[Method::IrradianceMap]);
 }
 
 #[test]
-#[ignore = "issue #12: irradiance maps interpolate across the crossing (docs/results.md)"]
 fn a_prop_piercing_a_wall_irradiance_maps() {
     check_contacts(&pierced_wall(), &[Method::IrradianceMap]);
 }
@@ -338,7 +336,6 @@ fn a_box_standing_on_and_piercing_a_floor_lightmap() {
 }
 
 #[test]
-#[ignore = "issue #12: irradiance maps 7.8 % at 1 mm (docs/results.md)"]
 fn a_box_standing_on_and_piercing_a_floor_irradiance_maps() {
     check_contacts(&boxes_on_a_floor(), &[Method::IrradianceMap]);
 }
@@ -350,7 +347,6 @@ fn a_t_junction_of_walls_lightmap() {
 }
 
 #[test]
-#[ignore = "issue #12: grid points on the line where the wall stands read dark (docs/results.md)"]
 fn a_t_junction_of_walls_irradiance_maps() {
     check_contacts(&t_junction(), &[Method::IrradianceMap]);
 }

@@ -23,8 +23,11 @@
 //!   sample moves there and is estimated on the visible part of its patch.
 
 use glam::{Vec2, Vec3};
-use surfcache_core::geometry::{orthonormal_basis, plane_barycentric};
+use surfcache_core::geometry::{interpolate, orthonormal_basis, plane_barycentric};
 use surfcache_trace::TracedScene;
+
+/// "No crossing line" in a cache's per-sample line indices.
+pub const NO_LINE: u32 = u32::MAX;
 
 /// In-plane probe rays per sample, evenly spread in angle.
 pub const PROBE_DIRECTIONS: u32 = 8;
@@ -47,6 +50,50 @@ impl CrossingLine {
     pub fn side(&self, x: Vec3) -> f32 {
         self.normal.dot(x - self.point)
     }
+
+    /// The line on triangle `t` as a line in a 2-D parameterisation of it whose corners
+    /// sit at `corners` (UV1, or `[(0,0), (1,0), (0,1)]` for barycentrics): `[a, b, c]`
+    /// with `a·u + b·v + c` the signed distance there, positive on the side of the point
+    /// at barycentrics `uv` (the sample, which may have moved since it was probed);
+    /// `None` if it cannot be mapped (a degenerate parameterisation).
+    pub fn in_uv(
+        &self,
+        scene: &TracedScene,
+        t: u32,
+        corners: [Vec2; 3],
+        uv: Vec2,
+    ) -> Option<[f32; 3]> {
+        let [a, b, c] = scene.positions[t as usize];
+        let mu = scene.geometric_normals[t as usize];
+        let along = mu.cross(self.normal);
+        let to_uv = |x: Vec3| {
+            interpolate(
+                corners[0],
+                corners[1],
+                corners[2],
+                plane_barycentric(x, a, b, c),
+            )
+        };
+        let scale = (b - a)
+            .length()
+            .max((c - a).length())
+            .max(f32::MIN_POSITIVE);
+        let (u0, u1) = (to_uv(self.point), to_uv(self.point + along * scale));
+        let normal = (u1 - u0).perp().try_normalize()?;
+        let sample = interpolate(corners[0], corners[1], corners[2], uv);
+        let (normal, offset) = if normal.dot(sample - u0) >= 0.0 {
+            (normal, -normal.dot(u0))
+        } else {
+            (-normal, normal.dot(u0))
+        };
+        Some([normal.x, normal.y, offset])
+    }
+}
+
+/// Whether `at` lies on the sample's side of a line made by [`CrossingLine::in_uv`].
+#[inline]
+pub fn on_side(line: [f32; 3], at: Vec2) -> bool {
+    line[0] * at.x + line[1] * at.y + line[2] >= 0.0
 }
 
 /// What the in-plane probes of one sample found.
@@ -63,6 +110,36 @@ pub struct Probe {
     pub touching: bool,
 }
 
+/// How close (metres) to `triangle`'s boundary, or to a crossing surface, a point counts
+/// as on it: four spawn offsets, at least 10⁻⁴ of the longest edge.
+pub fn boundary_tolerance(scene: &TracedScene, triangle: u32) -> f32 {
+    let [a, b, c] = scene.positions[triangle as usize];
+    let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+    (4.0 * scene.spawn_offset()).max(1e-4 * longest)
+}
+
+/// The *foot* of a sample at barycentrics `site` of `triangle` on its crossing line
+/// `line` (in barycentrics, [`CrossingLine::in_uv`]): the point of the triangle nearest
+/// to the crossing on the sample's side, two boundary tolerances short of it, where E
+/// next to the contact is estimated. Returns its barycentrics and its signed distance
+/// from the line (in the line's units), or `None` if it does not lie on the triangle or
+/// the sample is no farther from the line than the foot would be.
+pub fn foot(scene: &TracedScene, triangle: u32, line: [f32; 3], site: Vec2) -> Option<(Vec2, f32)> {
+    let [a, b, c] = scene.positions[triangle as usize];
+    let normal = Vec2::new(line[0], line[1]);
+    let metres = (normal.x * (b - a) + normal.y * (c - a)).length();
+    if metres <= 0.0 {
+        return None;
+    }
+    let gap = 2.0 * boundary_tolerance(scene, triangle) / metres;
+    let side = normal.dot(site) + line[2];
+    if side <= 2.0 * gap {
+        return None;
+    }
+    let foot = site - normal * (side - gap);
+    (foot.min_element() > 1e-4 && 1.0 - foot.x - foot.y > 1e-4).then_some((foot, gap))
+}
+
 /// Probes the surface around barycentrics `uv` of `triangle` on the given side within
 /// `reach` metres (module docs).
 pub fn probe(scene: &TracedScene, triangle: u32, uv: Vec2, front: bool, reach: f32) -> Probe {
@@ -73,8 +150,7 @@ pub fn probe(scene: &TracedScene, triangle: u32, uv: Vec2, front: bool, reach: f
     let same = SAME_SURFACE_DEGREES.to_radians().cos();
     let [a, b, c] = scene.positions[triangle as usize];
     let off = scene.spawn_offset();
-    let longest = (b - a).length().max((c - b).length()).max((a - c).length());
-    let boundary_tolerance = (4.0 * off).max(1e-4 * longest);
+    let boundary_tolerance = boundary_tolerance(scene, triangle);
     let mut best: Option<(f32, CrossingLine)> = None;
     let mut exit: Option<(f32, Vec2)> = None;
     for k in 0..PROBE_DIRECTIONS {

@@ -79,12 +79,27 @@
 //! the test unseen between the valid samples. A grid buried everywhere shows nothing and
 //! does not refine. Buried samples are counted in [`CacheStats::buried`].
 //!
+//! **Crossings** ([`crate::crossings`]). Grids that another surface crosses or touches
+//! ([`crossed_grids`]) refine to their maximum order, and each of their samples is probed
+//! in the surface's plane a little farther than one spacing of that order. A sample on a
+//! crossing surface (a grid point on the line where a wall stands) is estimated just
+//! beyond it, on the open side. A sample that a crossing passes within reach keeps the
+//! crossing's line (in barycentrics, oriented towards the sample) and one more estimate
+//! at its *foot*, the nearest point of the triangle just short of the line
+//! ([`crossings::foot`]). A lookup then leaves out the cell's samples that the line of
+//! their own crossing separates from the point looked up (renormalising the others'
+//! weights; the interpolation is unchanged where none is), and takes for a sample whose
+//! line lies between it and the point the value linear from its foot to it: E next to a contact is that of the contact, not of a
+//! sample up to a spacing away, and no light is carried across the crossing. The
+//! published textures cannot show either (an engine's filter knows no crossings).
+//!
 //! **Storage.** Samples are three half floats (6 bytes, [`crate::stored_rgb`], one
 //! [`StoreScale`] chosen from the largest
 //! stored value), grid by grid; a grid slot `2·triangle + side` (side 0 = front) has a
 //! `u32` offset and a `u8` level `log2(order) + 1` (0 = not baked). `cache_bytes = 6·samples +
-//! 5·grid slots + 4` (the last 4: the scale). Estimates' f32 values, standard errors and
-//! burial flags live only while baking.
+//! 5·grid slots + 4` (the last 4: the scale), plus, for crossed grids, 4 bytes a sample
+//! (its line), 8 a grid and 26 a line (line, distances, foot value). Estimates' f32
+//! values, standard errors and burial flags live only while baking.
 //!
 //! ```
 //! use surfcache_cache::{SurfaceCache, bake::bake_to_convergence};
@@ -169,6 +184,14 @@ pub const fn coarse_neighbours(i: u32, j: u32) -> [[u32; 2]; 2] {
 /// (i+1,j),(i,j+1),(i+1,j+1) gives `(1−fy)E(i+1,j) + (1−fx)E(i,j+1) + (fx+fy−1)E(i+1,j+1)`.
 #[inline]
 pub fn grid_interpolate(n: u32, uv: Vec2, grid: impl Fn(u32, u32) -> Vec3) -> Vec3 {
+    let [(i0, j0, w0), (i1, j1, w1), (i2, j2, w2)] = grid_cell(n, uv);
+    grid(i0, j0) * w0 + grid(i1, j1) * w1 + grid(i2, j2) * w2
+}
+
+/// The cell of an order-`n` grid holding barycentrics `uv` (clamped into the triangle):
+/// its three samples `(i, j)` with their weights in [`grid_interpolate`].
+#[inline]
+fn grid_cell(n: u32, uv: Vec2) -> [(u32, u32, f32); 3] {
     let mut uv = uv.max(Vec2::ZERO);
     let sum = uv.x + uv.y;
     if sum > 1.0 {
@@ -180,11 +203,44 @@ pub fn grid_interpolate(n: u32, uv: Vec2, grid: impl Fn(u32, u32) -> Vec3) -> Ve
     let j = (y.floor() as u32).min(n - 1 - i);
     let (fx, fy) = (x - i as f32, y - j as f32);
     if fx + fy <= 1.0 || i + j + 2 > n {
-        grid(i, j) * (1.0 - fx - fy) + grid(i + 1, j) * fx + grid(i, j + 1) * fy
+        [(i, j, 1.0 - fx - fy), (i + 1, j, fx), (i, j + 1, fy)]
     } else {
-        grid(i + 1, j) * (1.0 - fy)
-            + grid(i, j + 1) * (1.0 - fx)
-            + grid(i + 1, j + 1) * (fx + fy - 1.0)
+        [
+            (i + 1, j, 1.0 - fy),
+            (i, j + 1, 1.0 - fx),
+            (i + 1, j + 1, fx + fy - 1.0),
+        ]
+    }
+}
+
+/// [`grid_interpolate`] leaving out the samples `keep` rejects (a crossing separates
+/// them from the point looked up) and renormalising the others' weights; where every
+/// sample with weight is rejected the plain interpolation is returned.
+#[inline]
+pub fn grid_interpolate_kept(
+    n: u32,
+    uv: Vec2,
+    grid: impl Fn(u32, u32) -> Vec3,
+    keep: impl Fn(u32, u32) -> bool,
+) -> Vec3 {
+    let taps = grid_cell(n, uv);
+    let kept = taps.map(|(i, j, w)| w <= 0.0 || keep(i, j));
+    if kept.iter().all(|&k| k) {
+        return grid_interpolate(n, uv, grid);
+    }
+    let (mut sum, mut weight) = (Vec3::ZERO, 0.0f32);
+    for (&(i, j, w), _) in taps
+        .iter()
+        .zip(kept)
+        .filter(|&(&(_, _, w), k)| k && w > 0.0)
+    {
+        sum += grid(i, j) * w;
+        weight += w;
+    }
+    if weight > 0.0 {
+        sum / weight
+    } else {
+        grid_interpolate(n, uv, grid)
     }
 }
 
@@ -219,6 +275,9 @@ const fn corner_of(i: u32, j: u32, n: u32) -> Option<usize> {
         _ => None,
     }
 }
+
+/// Salt of a foot's random-stream key (from its sample's, [`sample_key`]).
+const FOOT_KEY: u64 = 0x0f00_7000_0000_0000;
 
 /// A corner without a representative ([`Working::links`]).
 const UNSHARED: u32 = u32::MAX;
@@ -449,6 +508,17 @@ struct Working {
     filled_error: Vec<Vec3>,
     /// Burial state of every sample ([`Burial::Buried`] or [`Burial::Valid`] when estimated).
     burial: Vec<Burial>,
+    /// Per sample: its crossing line in [`IrradianceMaps::lines`], or
+    /// [`crossings::NO_LINE`] (module docs, Crossings).
+    line_of: Vec<u32>,
+    /// Grid slots another surface crosses ([`crossed_grids`]): their samples are probed.
+    crossed: Vec<bool>,
+    /// Per new grid sample of the current round, in the order of `sources`: its line.
+    round_lines: Vec<u32>,
+    /// Per line: the estimate at its sample's foot (NaN: none, or buried).
+    feet: Vec<Vec3>,
+    /// This round's foot points: (line, round point).
+    round_feet: Vec<(u32, u32)>,
     /// Order (log2) of each grid slot's first round; empty: `min(2, n_max)` everywhere.
     start_log2: Vec<u8>,
     /// Grid slots whose punctual lights' shadow boundary crosses them
@@ -493,6 +563,66 @@ pub fn crossed_grids(scene: &TracedScene, max_orders: &[u32], bake: &[bool]) -> 
         .map(|g| {
             let t = (g / 2) as u32;
             bake[g] && crossings::grid_crossed(scene, t, g % 2 == 0, max_orders[t as usize].min(2))
+        })
+        .collect()
+}
+
+/// How far, in spacings of a crossed grid's maximum order, its samples are probed: a
+/// little over one, so that one of the [`crossings::PROBE_DIRECTIONS`] reaches a plane
+/// one spacing away (at most 22.5° off its normal: 1/cos 22.5° = 1.08).
+const REACH: f32 = 1.1;
+
+/// Probes the new samples of this round's crossed grids ([`crossings::probe`], as far as
+/// one spacing of the grid's maximum order, where lookups use the lines), in the order
+/// [`SurfaceCache::next_round`] visits them: each sample's site (a sample on a crossing
+/// surface moves just beyond it, as lightmap texels do) and its crossing line, oriented
+/// from the site, in barycentric coordinates.
+fn probe_new_samples(
+    scene: &TracedScene,
+    w: &Working,
+    levels: &[u8],
+) -> Vec<(Vec2, Option<SampleCrossing>, Option<Vec2>)> {
+    use rayon::prelude::*;
+    let mut sites = Vec::new();
+    for &g in w.pending.iter().filter(|&&g| w.crossed[g as usize]) {
+        let coarse = order_of_level(levels[g as usize]);
+        let n = if coarse == 0 {
+            1 << w.start_log2(g as usize)
+        } else {
+            2 * coarse
+        };
+        let inv = 1.0 / n as f32;
+        for_each_new_sample(coarse, n, |i, j, _| {
+            sites.push((g, Vec2::new(i as f32 * inv, j as f32 * inv)));
+        });
+    }
+    let corners = [Vec2::ZERO, Vec2::X, Vec2::Y];
+    sites
+        .par_iter()
+        .map(|&(g, uv)| {
+            let (t, front) = (g / 2, g % 2 == 0);
+            let [a, b, c] = scene.positions[t as usize];
+            let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+            let reach = REACH * longest / w.max_orders[t as usize] as f32;
+            let probe = crossings::probe(scene, t, uv, front, reach);
+            let site = match probe.exit {
+                Some(exit) if probe.touching => exit,
+                _ => uv,
+            };
+            let Some(line) = probe
+                .crossing
+                .and_then(|line| line.in_uv(scene, t, corners, site))
+            else {
+                return (site, None, None);
+            };
+            let side = line[0] * site.x + line[1] * site.y + line[2];
+            let foot = crossings::foot(scene, t, line, site);
+            let crossing = SampleCrossing {
+                line,
+                site: side,
+                foot: foot.map_or(side, |(_, gap)| gap),
+            };
+            (site, Some(crossing), foot.map(|(uv, _)| uv))
         })
         .collect()
 }
@@ -546,6 +676,33 @@ pub fn punctual_shadow_edges(scene: &TracedScene, max_orders: &[u32], bake: &[bo
         .collect()
 }
 
+/// A sample's crossing line (module docs, Crossings): `line` in barycentric coordinates
+/// of its triangle ([`CrossingLine::in_uv`](crossings::CrossingLine::in_uv)), positive
+/// on the sample's side; `site` and `foot` the signed distances of the sample and of its
+/// foot ([`crossings::foot`]) from it, `foot ≥ site` where the sample has no foot.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+struct SampleCrossing {
+    line: [f32; 3],
+    site: f32,
+    foot: f32,
+}
+
+impl SampleCrossing {
+    /// The value a lookup at `at` takes for the sample of value `e` with foot value
+    /// `foot`: E along the line's normal, linear from the foot to the sample,
+    /// `E_f + (E − E_f)·(s − s_f)/(s_site − s_f)` for `s < s_site` (continued to the
+    /// line), the sample's own value beyond it.
+    #[inline]
+    fn value(&self, at: Vec2, e: Vec3, foot: Vec3) -> Vec3 {
+        let s = self.line[0] * at.x + self.line[1] * at.y + self.line[2];
+        if self.foot >= self.site || s >= self.site {
+            return e;
+        }
+        let t = (s.max(0.0) - self.foot) / (self.site - self.foot);
+        (foot + (e - foot) * t).max(Vec3::ZERO)
+    }
+}
+
 /// Per-triangle adaptive irradiance maps (module docs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IrradianceMaps {
@@ -563,6 +720,19 @@ pub struct IrradianceMaps {
     scale: StoreScale,
     totals: EstimateTotals,
     buried: u64,
+    /// The crossing line of each sample that has one (module docs, Crossings).
+    #[serde(default)]
+    lines: Vec<SampleCrossing>,
+    /// E at each line's foot ([`SampleCrossing::foot`]; zero where it has none).
+    #[serde(default)]
+    feet: Vec<StoredRgb>,
+    /// Crossed grid slots, ascending, each with its first entry in `sample_lines`.
+    #[serde(default)]
+    crossed_grids: Vec<[u32; 2]>,
+    /// Per sample of each crossed grid, in [`grid_index`] order: its line in `lines`, or
+    /// [`crossings::NO_LINE`].
+    #[serde(default)]
+    sample_lines: Vec<u32>,
     #[serde(skip)]
     working: Option<Box<Working>>,
 }
@@ -589,11 +759,8 @@ impl IrradianceMaps {
             })
             .collect();
         let mut shadow_edges = punctual_shadow_edges(scene, &max_orders, &refine);
-        for (forced, crossed) in
-            shadow_edges
-                .iter_mut()
-                .zip(crossed_grids(scene, &max_orders, &refine))
-        {
+        let crossed = crossed_grids(scene, &max_orders, &refine);
+        for (forced, &crossed) in shadow_edges.iter_mut().zip(&crossed) {
             *forced |= crossed;
         }
         let links = if settings.share_corners {
@@ -610,10 +777,15 @@ impl IrradianceMaps {
             scale: StoreScale::default(),
             totals: EstimateTotals::default(),
             buried: 0,
+            lines: Vec::new(),
+            feet: Vec::new(),
+            crossed_grids: Vec::new(),
+            sample_lines: Vec::new(),
             working: Some(Box::new(Working {
                 max_orders,
                 refine,
                 shadow_edges,
+                crossed,
                 links,
                 ..Default::default()
             })),
@@ -641,6 +813,16 @@ impl IrradianceMaps {
         let g = Self::slot(triangle, front);
         self.scale
             .unpack(self.packed[self.offsets[g] as usize + grid_index(i, j)])
+    }
+
+    /// Whether another surface crosses the grid on one side of `triangle`: its lookups
+    /// then leave out samples across the crossing and blend towards the samples' feet
+    /// (module docs, Crossings), which the published textures cannot show.
+    pub fn is_crossed(&self, triangle: u32, front: bool) -> bool {
+        let g = Self::slot(triangle, front) as u32;
+        self.crossed_grids
+            .binary_search_by_key(&g, |c| c[0])
+            .is_ok()
     }
 
     /// Whether the bake has converged (no grid asks for refinement any more).
@@ -757,6 +939,9 @@ impl SurfaceCache for IrradianceMaps {
         let start = points.len();
         let w = &mut **w;
         w.sources.clear();
+        w.round_lines.clear();
+        w.round_feet.clear();
+        let mut probed = probe_new_samples(scene, w, &self.levels).into_iter();
         // Round point of each corner asked for in this round (only rounds that make
         // grids have corners to share).
         let mut corner_points = Vec::new();
@@ -777,7 +962,34 @@ impl SurfaceCache for IrradianceMaps {
                 Some(&o) if coarse == 0 && o != u32::MAX => Some(o as usize),
                 _ => None,
             };
+            let crossed = w.crossed[g as usize];
             for_each_new_sample(coarse, n, |i, j, m| {
+                let mut uv = Vec2::new(i as f32 * inv, j as f32 * inv);
+                let mut line = crossings::NO_LINE;
+                let sample_key = sample_key(key, front, i, j, n);
+                if crossed {
+                    let (site, crossing, foot) = probed.next().expect("one probe per new sample");
+                    uv = site;
+                    if let Some(l) = crossing {
+                        line = self.lines.len() as u32;
+                        self.lines.push(l);
+                        w.feet.push(Vec3::NAN);
+                    }
+                    if let Some(foot) = foot {
+                        w.round_feet.push((line, (points.len() - start) as u32));
+                        points.push(SamplePoint {
+                            site: SampleSite::Surface {
+                                triangle: t,
+                                uv: foot,
+                                front,
+                            },
+                            key: splitmix64(sample_key ^ FOOT_KEY),
+                            prior: None,
+                            budget: None,
+                        });
+                    }
+                }
+                w.round_lines.push(line);
                 let corner = match (coarse, corner_of(i, j, n)) {
                     (0, Some(k)) if !corner_points.is_empty() => Some(3 * g as usize + k),
                     _ => None,
@@ -794,10 +1006,10 @@ impl SurfaceCache for IrradianceMaps {
                 points.push(SamplePoint {
                     site: SampleSite::Surface {
                         triangle: t,
-                        uv: Vec2::new(i as f32 * inv, j as f32 * inv),
+                        uv,
                         front,
                     },
-                    key: sample_key(key, front, i, j, n),
+                    key: sample_key,
                     prior: prior_base.map(|b| w.priors[b + m]),
                     budget: None,
                 });
@@ -841,6 +1053,7 @@ impl SurfaceCache for IrradianceMaps {
         let mut samples = vec![0u32; total];
         let mut std_error = vec![Vec3::ZERO; total];
         let mut burial = vec![Burial::Valid; total];
+        let mut line_of = vec![crossings::NO_LINE; total];
         for g in 0..slots {
             let (old, new) = (
                 order_of_level(self.levels[g]),
@@ -856,6 +1069,7 @@ impl SurfaceCache for IrradianceMaps {
                 samples[to..to + s].copy_from_slice(&w.samples[from..from + s]);
                 std_error[to..to + s].copy_from_slice(&w.std_error[from..from + s]);
                 burial[to..to + s].copy_from_slice(&w.burial[from..from + s]);
+                line_of[to..to + s].copy_from_slice(&w.line_of[from..from + s]);
             } else {
                 for d in 0..=old {
                     for j in 0..=d {
@@ -864,6 +1078,7 @@ impl SurfaceCache for IrradianceMaps {
                         raw[b] = w.raw[a];
                         samples[b] = w.samples[a];
                         std_error[b] = w.std_error[a];
+                        line_of[b] = w.line_of[a];
                         burial[b] = if w.burial[a] == Burial::Valid {
                             Burial::Valid
                         } else {
@@ -882,6 +1097,7 @@ impl SurfaceCache for IrradianceMaps {
             let base = offsets[g as usize] as usize;
             for_each_new_sample(coarse, n, |_, _, m| {
                 let e = &estimates[w.sources[next] as usize];
+                line_of[base + m] = w.round_lines[next];
                 next += 1;
                 raw[base + m] = e.value;
                 samples[base + m] = e.samples;
@@ -893,6 +1109,14 @@ impl SurfaceCache for IrradianceMaps {
                 };
             });
         }
+        for &(line, point) in &w.round_feet {
+            let e = &estimates[point as usize];
+            w.feet[line as usize] = if e.back_face_share > threshold {
+                Vec3::NAN
+            } else {
+                e.value
+            };
+        }
         estimates.iter().for_each(|e| self.totals.add(e));
         self.levels = new_levels;
         self.offsets = offsets;
@@ -900,6 +1124,7 @@ impl SurfaceCache for IrradianceMaps {
         w.samples = samples;
         w.std_error = std_error;
         w.burial = burial;
+        w.line_of = line_of;
         // Fill buried samples (every grid: cheap, and independent of history).
         w.filled = vec![Vec3::ZERO; total];
         w.filled_error = vec![Vec3::ZERO; total];
@@ -932,16 +1157,42 @@ impl SurfaceCache for IrradianceMaps {
         w.pending.clear();
         w.pending_points = 0;
         w.sources.clear();
+        w.round_lines.clear();
+        w.round_feet.clear();
         // Priors serve the first round only.
         w.priors = Vec::new();
         w.prior_offsets = Vec::new();
         // Pack: half floats with a scale for the largest value.
-        let max = w.filled.iter().fold(0.0f32, |m, v| m.max(v.max_element()));
+        let max = w
+            .filled
+            .iter()
+            .chain(w.feet.iter().filter(|f| !f.is_nan()))
+            .fold(0.0f32, |m, v| m.max(v.max_element()));
         self.scale = StoreScale::for_max(max);
         self.packed.clear();
         self.packed
             .extend(w.filled.iter().map(|&v| self.scale.pack(v)));
         self.sample_counts.clone_from(&w.samples);
+        for (line, foot) in self.lines.iter_mut().zip(&w.feet) {
+            if foot.is_nan() {
+                line.foot = line.site;
+            }
+        }
+        self.feet.clear();
+        self.feet.extend(
+            w.feet
+                .iter()
+                .map(|&f| self.scale.pack(if f.is_nan() { Vec3::ZERO } else { f })),
+        );
+        self.crossed_grids.clear();
+        self.sample_lines.clear();
+        for g in (0..slots).filter(|&g| w.crossed[g] && self.levels[g] > 0) {
+            let (base, n) = (self.offsets[g] as usize, order_of_level(self.levels[g]));
+            self.crossed_grids
+                .push([g as u32, self.sample_lines.len() as u32]);
+            self.sample_lines
+                .extend_from_slice(&w.line_of[base..base + grid_size(n)]);
+        }
         self.working = Some(w);
     }
 
@@ -953,7 +1204,29 @@ impl SurfaceCache for IrradianceMaps {
         }
         let base = self.offsets[g] as usize;
         let packed = &self.packed[base..base + grid_size(n)];
-        grid_interpolate(n, uv, |i, j| self.scale.unpack(packed[grid_index(i, j)]))
+        let value = |i, j| self.scale.unpack(packed[grid_index(i, j)]);
+        match self
+            .crossed_grids
+            .binary_search_by_key(&(g as u32), |c| c[0])
+        {
+            Ok(k) => {
+                let first = self.crossed_grids[k][1] as usize;
+                let lines = &self.sample_lines[first..first + grid_size(n)];
+                let near = |i, j| match lines[grid_index(i, j)] {
+                    crossings::NO_LINE => value(i, j),
+                    l => self.lines[l as usize].value(
+                        uv,
+                        value(i, j),
+                        self.scale.unpack(self.feet[l as usize]),
+                    ),
+                };
+                grid_interpolate_kept(n, uv, near, |i, j| match lines[grid_index(i, j)] {
+                    crossings::NO_LINE => true,
+                    l => crossings::on_side(self.lines[l as usize].line, uv),
+                })
+            }
+            Err(_) => grid_interpolate(n, uv, value),
+        }
     }
 
     /// Every grid of a surviving triangle starts at its order before the edit, all its
@@ -1025,7 +1298,10 @@ impl SurfaceCache for IrradianceMaps {
         CacheStats {
             cache_bytes: STORED_RGB_BYTES * self.packed.len() as u64
                 + 5 * self.levels.len() as u64
-                + 4,
+                + 4
+                + (20 + STORED_RGB_BYTES) * self.lines.len() as u64
+                + 8 * self.crossed_grids.len() as u64
+                + 4 * self.sample_lines.len() as u64,
             order_histogram,
             buried: self.buried,
             ..self.totals.stats()

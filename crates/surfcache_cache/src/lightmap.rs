@@ -24,7 +24,7 @@ use crate::{
     CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
     UNMAPPED,
     charts::{self, TEXEL_EPSILON},
-    crossings::{self, CrossingLine, Probe},
+    crossings::{self, Probe},
     filter::{self, FilterInput, FilterSettings},
     stored_rgb::{STORED_RGB_BYTES, StoreScale, StoredRgb},
 };
@@ -638,7 +638,7 @@ impl Lightmaps {
         for (slot, (uv, probe)) in probes.iter().enumerate() {
             let Some(line) = probe.crossing else { continue };
             let t = self.owner[slot % self.layer_texels];
-            let Some(l) = uv1_line(scene, t, self.uv1[t as usize], *uv, &line) else {
+            let Some(l) = line.in_uv(scene, t, self.uv1[t as usize], *uv) else {
                 continue;
             };
             self.crossing_slot[slot] = self.crossing_lines.len() as u32;
@@ -1022,39 +1022,6 @@ fn bilinear_packed(
     if weight > 0.0 { sum / weight } else { plain() }
 }
 
-/// A crossing line of the footprint of the texel sampled at barycentrics `uv` of
-/// triangle `t` (UV1 corners `uv1`), in UV1 space: `[a, b, c]` with `a·u + b·v + c` the
-/// signed distance (UV units), positive on the sample's side; `None` if it cannot be
-/// mapped (a degenerate UV1 triangle).
-fn uv1_line(
-    scene: &TracedScene,
-    t: u32,
-    uv1: [Vec2; 3],
-    uv: Vec2,
-    line: &CrossingLine,
-) -> Option<[f32; 3]> {
-    let [a, b, c] = scene.positions[t as usize];
-    let mu = scene.geometric_normals[t as usize];
-    let along = mu.cross(line.normal);
-    let to_uv1 = |x: Vec3| {
-        let bary = surfcache_core::geometry::plane_barycentric(x, a, b, c);
-        interpolate(uv1[0], uv1[1], uv1[2], bary)
-    };
-    let scale = (b - a)
-        .length()
-        .max((c - a).length())
-        .max(f32::MIN_POSITIVE);
-    let (u0, u1) = (to_uv1(line.point), to_uv1(line.point + along * scale));
-    let normal = (u1 - u0).perp().try_normalize()?;
-    let sample = interpolate(uv1[0], uv1[1], uv1[2], uv);
-    let (normal, offset) = if normal.dot(sample - u0) >= 0.0 {
-        (normal, -normal.dot(u0))
-    } else {
-        (-normal, normal.dot(u0))
-    };
-    Some([normal.x, normal.y, offset])
-}
-
 impl SurfaceCache for Lightmaps {
     fn method(&self) -> Method {
         Method::Lightmap
@@ -1218,10 +1185,7 @@ impl SurfaceCache for Lightmaps {
             at,
             self.scale,
             |k| match crossings.get(base + k).copied() {
-                Some(c) if c != NONE => {
-                    let [la, lb, lc] = lines[c as usize];
-                    la * at.x + lb * at.y + lc >= 0.0
-                }
+                Some(c) if c != NONE => crossings::on_side(lines[c as usize], at),
                 _ => true,
             },
         )
