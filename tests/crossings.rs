@@ -341,7 +341,6 @@ fn a_box_standing_on_and_piercing_a_floor_irradiance_maps() {
 }
 
 #[test]
-#[ignore = "issue #12: lightmaps 5.1 % at 1 mm behind the wall (docs/results.md)"]
 fn a_t_junction_of_walls_lightmap() {
     check_contacts(&t_junction(), &[Method::Lightmap]);
 }

@@ -23,11 +23,19 @@
 //!   sample moves there and is estimated on the visible part of its patch.
 
 use glam::{Vec2, Vec3};
+use serde::{Deserialize, Serialize};
 use surfcache_core::geometry::{interpolate, orthonormal_basis, plane_barycentric};
 use surfcache_trace::TracedScene;
 
 /// "No crossing line" in a cache's per-sample line indices.
 pub const NO_LINE: u32 = u32::MAX;
+
+/// How far, in sample spacings (a texel, a grid spacing), a cache probes its samples for
+/// the crossing lines its lookups use: a little over one, so that the samples on both
+/// sides of a crossing between two of them know it, and one of the
+/// [`PROBE_DIRECTIONS`] reaches a plane one spacing away (at most 22.5° off its normal:
+/// 1/cos 22.5° = 1.08).
+pub const LINE_REACH: f32 = 1.1;
 
 /// In-plane probe rays per sample, evenly spread in angle.
 pub const PROBE_DIRECTIONS: u32 = 8;
@@ -104,11 +112,63 @@ pub struct Probe {
     /// Barycentrics on the sample's triangle just beyond the nearest crossing met from
     /// behind, if that point lies on the triangle (module docs).
     pub exit: Option<Vec2>,
+    /// How far from the sample the probe met the crossing surface of [`Probe::exit`].
+    pub exit_distance: f32,
     /// The sample lies on a crossing surface (met from behind within the boundary
     /// tolerance: a texel centre on the line where a wall stands). Its own estimate would
     /// see that surface at t ≈ 0 in every direction; it belongs at [`Probe::exit`].
     pub touching: bool,
 }
+
+/// A sample's crossing line as a cache keeps it: `line` in a 2-D parameterisation of its
+/// triangle (barycentrics for irradiance maps, UV1 for lightmaps;
+/// [`CrossingLine::in_uv`]), positive on the sample's side; `site` and `foot` the signed
+/// distances of the sample and of its foot ([`foot`]) from it, `foot ≥ site` where the
+/// sample has no foot.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SampleCrossing {
+    pub line: [f32; 3],
+    pub site: f32,
+    pub foot: f32,
+}
+
+impl SampleCrossing {
+    /// Whether `at` lies on the sample's side of the line.
+    #[inline]
+    pub fn on_side(&self, at: Vec2) -> bool {
+        on_side(self.line, at)
+    }
+
+    /// The value a lookup at `at` takes for the sample of value `e` whose foot has value
+    /// `foot`: E along the line's normal, linear from the foot to the sample,
+    /// `E_f + (E − E_f)·(s − s_f)/(s_site − s_f)` for `s < s_site` (continued to the
+    /// line), the sample's own value beyond it.
+    #[inline]
+    pub fn value(&self, at: Vec2, e: Vec3, foot: Vec3) -> Vec3 {
+        let s = self.line[0] * at.x + self.line[1] * at.y + self.line[2];
+        if self.foot >= self.site || s >= self.site {
+            return e;
+        }
+        let t = (s.max(0.0) - self.foot) / (self.site - self.foot);
+        (foot + (e - foot) * t).max(Vec3::ZERO)
+    }
+
+    /// Whether [`Self::value`] at `at` may differ from the sample's own value.
+    #[inline]
+    pub fn blends_at(&self, at: Vec2) -> bool {
+        self.foot < self.site
+            && self.line[0] * at.x + self.line[1] * at.y + self.line[2] < self.site
+    }
+}
+
+/// A foot's estimate counts as buried (inside other geometry) past this share of rays on
+/// back faces: more than a texel's or grid sample's threshold, since a foot next to the
+/// back of a single-sided wall sees that back over up to half its hemisphere and is
+/// still in the open.
+pub const FOOT_BURIED_SHARE: f32 = 0.75;
+
+/// Salt of a foot's random-stream key (xor-ed into its sample's key, then hashed).
+pub const FOOT_KEY: u64 = 0x0f00_7000_0000_0000;
 
 /// How close (metres) to `triangle`'s boundary, or to a crossing surface, a point counts
 /// as on it: four spawn offsets, at least 10⁻⁴ of the longest edge.
@@ -118,26 +178,42 @@ pub fn boundary_tolerance(scene: &TracedScene, triangle: u32) -> f32 {
     (4.0 * scene.spawn_offset()).max(1e-4 * longest)
 }
 
-/// The *foot* of a sample at barycentrics `site` of `triangle` on its crossing line
-/// `line` (in barycentrics, [`CrossingLine::in_uv`]): the point of the triangle nearest
-/// to the crossing on the sample's side, two boundary tolerances short of it, where E
-/// next to the contact is estimated. Returns its barycentrics and its signed distance
-/// from the line (in the line's units), or `None` if it does not lie on the triangle or
-/// the sample is no farther from the line than the foot would be.
-pub fn foot(scene: &TracedScene, triangle: u32, line: [f32; 3], site: Vec2) -> Option<(Vec2, f32)> {
+/// The *foot* of a sample at barycentrics `site` on one side of `triangle` on its
+/// crossing `crossing` (the same line in barycentrics: `line`, [`CrossingLine::in_uv`]):
+/// the point of the triangle nearest to the line on the sample's side, two boundary
+/// tolerances short of it, where E next to the contact is estimated. Returns its
+/// barycentrics and its signed distance from `line`, or `None` if it does not lie on the
+/// triangle, the sample is no farther from the line than the foot would be, or the
+/// crossing surface does not reach the foot (the line runs on past the end of a wall or
+/// a box's corner: an in-plane ray from the foot towards the line meets nothing).
+pub fn foot(
+    scene: &TracedScene,
+    triangle: u32,
+    front: bool,
+    crossing: &CrossingLine,
+    line: [f32; 3],
+    site: Vec2,
+) -> Option<(Vec2, f32)> {
     let [a, b, c] = scene.positions[triangle as usize];
     let normal = Vec2::new(line[0], line[1]);
     let metres = (normal.x * (b - a) + normal.y * (c - a)).length();
     if metres <= 0.0 {
         return None;
     }
-    let gap = 2.0 * boundary_tolerance(scene, triangle) / metres;
+    let tolerance = boundary_tolerance(scene, triangle);
+    let gap = 2.0 * tolerance / metres;
     let side = normal.dot(site) + line[2];
     if side <= 2.0 * gap {
         return None;
     }
     let foot = site - normal * (side - gap);
-    (foot.min_element() > 1e-4 && 1.0 - foot.x - foot.y > 1e-4).then_some((foot, gap))
+    if foot.min_element() <= 1e-4 || 1.0 - foot.x - foot.y <= 1e-4 {
+        return None;
+    }
+    let origin = scene.spawn_origin(&scene.surface_point(triangle, foot, front));
+    scene
+        .occluded(origin, -crossing.normal, 4.0 * tolerance)
+        .then_some((foot, gap))
 }
 
 /// Probes the surface around barycentrics `uv` of `triangle` on the given side within
@@ -206,10 +282,12 @@ pub fn probe(scene: &TracedScene, triangle: u32, uv: Vec2, front: bool, reach: f
         }
     }
     let touching = exit.is_some_and(|(t, _)| t < boundary_tolerance);
+    let exit_distance = exit.map_or(f32::INFINITY, |(t, _)| t);
     let exit = exit.map(|(_, uv)| uv);
     Probe {
         crossing: best.map(|(_, line)| line),
         exit,
+        exit_distance,
         touching,
     }
 }

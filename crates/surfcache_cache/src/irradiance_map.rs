@@ -276,9 +276,6 @@ const fn corner_of(i: u32, j: u32, n: u32) -> Option<usize> {
     }
 }
 
-/// Salt of a foot's random-stream key (from its sample's, [`sample_key`]).
-const FOOT_KEY: u64 = 0x0f00_7000_0000_0000;
-
 /// A corner without a representative ([`Working::links`]).
 const UNSHARED: u32 = u32::MAX;
 
@@ -567,11 +564,6 @@ pub fn crossed_grids(scene: &TracedScene, max_orders: &[u32], bake: &[bool]) -> 
         .collect()
 }
 
-/// How far, in spacings of a crossed grid's maximum order, its samples are probed: a
-/// little over one, so that one of the [`crossings::PROBE_DIRECTIONS`] reaches a plane
-/// one spacing away (at most 22.5° off its normal: 1/cos 22.5° = 1.08).
-const REACH: f32 = 1.1;
-
 /// Probes the new samples of this round's crossed grids ([`crossings::probe`], as far as
 /// one spacing of the grid's maximum order, where lookups use the lines), in the order
 /// [`SurfaceCache::next_round`] visits them: each sample's site (a sample on a crossing
@@ -581,7 +573,7 @@ fn probe_new_samples(
     scene: &TracedScene,
     w: &Working,
     levels: &[u8],
-) -> Vec<(Vec2, Option<SampleCrossing>, Option<Vec2>)> {
+) -> Vec<(Vec2, Option<crossings::SampleCrossing>, Option<Vec2>)> {
     use rayon::prelude::*;
     let mut sites = Vec::new();
     for &g in w.pending.iter().filter(|&&g| w.crossed[g as usize]) {
@@ -603,21 +595,21 @@ fn probe_new_samples(
             let (t, front) = (g / 2, g % 2 == 0);
             let [a, b, c] = scene.positions[t as usize];
             let longest = (b - a).length().max((c - b).length()).max((a - c).length());
-            let reach = REACH * longest / w.max_orders[t as usize] as f32;
+            let reach = crossings::LINE_REACH * longest / w.max_orders[t as usize] as f32;
             let probe = crossings::probe(scene, t, uv, front, reach);
             let site = match probe.exit {
                 Some(exit) if probe.touching => exit,
                 _ => uv,
             };
-            let Some(line) = probe
+            let Some((crossing, line)) = probe
                 .crossing
-                .and_then(|line| line.in_uv(scene, t, corners, site))
+                .and_then(|c| Some((c, c.in_uv(scene, t, corners, site)?)))
             else {
                 return (site, None, None);
             };
             let side = line[0] * site.x + line[1] * site.y + line[2];
-            let foot = crossings::foot(scene, t, line, site);
-            let crossing = SampleCrossing {
+            let foot = crossings::foot(scene, t, front, &crossing, line, site);
+            let crossing = crossings::SampleCrossing {
                 line,
                 site: side,
                 foot: foot.map_or(side, |(_, gap)| gap),
@@ -676,33 +668,6 @@ pub fn punctual_shadow_edges(scene: &TracedScene, max_orders: &[u32], bake: &[bo
         .collect()
 }
 
-/// A sample's crossing line (module docs, Crossings): `line` in barycentric coordinates
-/// of its triangle ([`CrossingLine::in_uv`](crossings::CrossingLine::in_uv)), positive
-/// on the sample's side; `site` and `foot` the signed distances of the sample and of its
-/// foot ([`crossings::foot`]) from it, `foot ≥ site` where the sample has no foot.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-struct SampleCrossing {
-    line: [f32; 3],
-    site: f32,
-    foot: f32,
-}
-
-impl SampleCrossing {
-    /// The value a lookup at `at` takes for the sample of value `e` with foot value
-    /// `foot`: E along the line's normal, linear from the foot to the sample,
-    /// `E_f + (E − E_f)·(s − s_f)/(s_site − s_f)` for `s < s_site` (continued to the
-    /// line), the sample's own value beyond it.
-    #[inline]
-    fn value(&self, at: Vec2, e: Vec3, foot: Vec3) -> Vec3 {
-        let s = self.line[0] * at.x + self.line[1] * at.y + self.line[2];
-        if self.foot >= self.site || s >= self.site {
-            return e;
-        }
-        let t = (s.max(0.0) - self.foot) / (self.site - self.foot);
-        (foot + (e - foot) * t).max(Vec3::ZERO)
-    }
-}
-
 /// Per-triangle adaptive irradiance maps (module docs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IrradianceMaps {
@@ -722,8 +687,8 @@ pub struct IrradianceMaps {
     buried: u64,
     /// The crossing line of each sample that has one (module docs, Crossings).
     #[serde(default)]
-    lines: Vec<SampleCrossing>,
-    /// E at each line's foot ([`SampleCrossing::foot`]; zero where it has none).
+    lines: Vec<crossings::SampleCrossing>,
+    /// E at each line's foot ([`crossings::SampleCrossing::foot`]; zero where it has none).
     #[serde(default)]
     feet: Vec<StoredRgb>,
     /// Crossed grid slots, ascending, each with its first entry in `sample_lines`.
@@ -983,7 +948,7 @@ impl SurfaceCache for IrradianceMaps {
                                 uv: foot,
                                 front,
                             },
-                            key: splitmix64(sample_key ^ FOOT_KEY),
+                            key: splitmix64(sample_key ^ crossings::FOOT_KEY),
                             prior: None,
                             budget: None,
                         });
@@ -1111,7 +1076,7 @@ impl SurfaceCache for IrradianceMaps {
         }
         for &(line, point) in &w.round_feet {
             let e = &estimates[point as usize];
-            w.feet[line as usize] = if e.back_face_share > threshold {
+            w.feet[line as usize] = if e.back_face_share > crossings::FOOT_BURIED_SHARE {
                 Vec3::NAN
             } else {
                 e.value

@@ -164,9 +164,25 @@ pub struct Lightmaps {
     /// looked up (module docs, Crossings).
     #[serde(default)]
     crossing_slot: Vec<u32>,
-    /// Crossing lines in UV1 space: `a·u + b·v + c ≥ 0` on the texel's own side.
+    /// Crossing lines in UV1 space (`a·u + b·v + c ≥ 0` on the texel's own side) with the
+    /// distances of the texel's site and of its foot.
     #[serde(default)]
-    crossing_lines: Vec<[f32; 3]>,
+    crossing_lines: Vec<crossings::SampleCrossing>,
+    /// E at each crossing line's foot (zero where it has none).
+    #[serde(default)]
+    crossing_feet: Vec<StoredRgb>,
+    /// While baking: each line's foot (barycentrics on the texel's owner), if it has one,
+    /// and its estimate (NaN: none yet, or buried).
+    #[serde(skip)]
+    foot_sites: Vec<Option<Vec2>>,
+    #[serde(skip)]
+    feet: Vec<Vec3>,
+    /// The line of each foot point of the current round (after its texel points).
+    #[serde(skip)]
+    foot_lines: Vec<u32>,
+    /// Hemisphere samples the feet took (counted in the statistics).
+    #[serde(skip)]
+    foot_samples: u64,
     emitted: bool,
     /// Stored texels of all layers.
     packed: Vec<StoredRgb>,
@@ -249,6 +265,11 @@ impl Lightmaps {
             exits: Vec::new(),
             crossing_slot: Vec::new(),
             crossing_lines: Vec::new(),
+            crossing_feet: Vec::new(),
+            foot_sites: Vec::new(),
+            feet: Vec::new(),
+            foot_lines: Vec::new(),
+            foot_samples: 0,
             emitted: false,
             packed: vec![[0; 3]; layers * layer_texels],
             sample_counts: Vec::new(),
@@ -586,9 +607,32 @@ impl Lightmaps {
             .fold(0.0f32, f32::max);
         self.scale = StoreScale::for_max(max);
         self.packed = values.iter().map(|&v| self.scale.pack(v)).collect();
+        // Feet share the texels' scale (clamped to their largest value, so that the
+        // texels are stored as without them).
+        for (line, foot) in self.crossing_lines.iter_mut().zip(&self.feet) {
+            if foot.is_nan() {
+                line.foot = line.site;
+            }
+        }
+        self.crossing_feet = self
+            .feet
+            .iter()
+            .map(|&f| {
+                self.scale.pack(if f.is_nan() {
+                    Vec3::ZERO
+                } else {
+                    f.min(Vec3::splat(max))
+                })
+            })
+            .collect();
+        stats.sample_points += self.foot_sites.iter().flatten().count() as u64;
+        stats.samples += self.foot_samples;
         // UV1: three f32 pairs per triangle corner (a generated layout needs a vertex per
         // corner); the per-triangle instance index is the engine's mesh binding.
-        stats.cache_bytes = STORED_RGB_BYTES * total as u64 + 24 * self.uv1.len() as u64;
+        stats.cache_bytes = STORED_RGB_BYTES * total as u64
+            + 24 * self.uv1.len() as u64
+            + 4 * self.crossing_slot.len() as u64
+            + (20 + STORED_RGB_BYTES) * self.crossing_lines.len() as u64;
         self.stats = stats;
         self.slots = Vec::new();
         self.priors = Vec::new();
@@ -596,11 +640,14 @@ impl Lightmaps {
         self.pending = Vec::new();
         self.site_uv = Vec::new();
         self.exits = Vec::new();
+        self.foot_sites = Vec::new();
+        self.feet = Vec::new();
     }
 
-    /// Probes every owned slot for crossings within its texel's footprint
-    /// ([`crossings::probe`], reach ¾ of a texel): records exits for buried texels and
-    /// each crossing as a line in UV1 space for lookups.
+    /// Probes every owned slot for crossings near its texel ([`crossings::probe`], as far
+    /// as [`crossings::LINE_REACH`] texels): records exits within its footprint
+    /// ([`EXIT_REACH`]) for buried texels, and each crossing as a line in UV1 space with
+    /// its foot for lookups.
     fn probe_crossings(&mut self, scene: &TracedScene) {
         let total = self.layers * self.layer_texels;
         let probes: Vec<(Vec2, Probe)> = (0..total)
@@ -612,8 +659,18 @@ impl Lightmaps {
                     NONE => (uv, Probe::default()),
                     t => {
                         let m = &self.maps[self.triangle_instance[t as usize] as usize];
-                        let reach = 0.75 / m.texels_per_metre.max(f32::MIN_POSITIVE);
-                        let probe = crossings::probe(scene, t, uv, layer == 0, reach);
+                        let texel = 1.0 / m.texels_per_metre.max(f32::MIN_POSITIVE);
+                        let mut probe = crossings::probe(
+                            scene,
+                            t,
+                            uv,
+                            layer == 0,
+                            crossings::LINE_REACH * texel,
+                        );
+                        // A buried texel moves only within its own footprint.
+                        if probe.exit_distance > EXIT_REACH * texel {
+                            probe.exit = None;
+                        }
                         // A centre on a crossing surface is estimated just beyond it, on
                         // the open side, from the first round on; its crossing line is
                         // oriented from there.
@@ -635,17 +692,40 @@ impl Lightmaps {
         self.exits = probes.iter().map(|(_, p)| p.exit).collect();
         self.crossing_slot = vec![NONE; total];
         self.crossing_lines.clear();
+        self.foot_sites.clear();
         for (slot, (uv, probe)) in probes.iter().enumerate() {
             let Some(line) = probe.crossing else { continue };
             let t = self.owner[slot % self.layer_texels];
-            let Some(l) = line.in_uv(scene, t, self.uv1[t as usize], *uv) else {
+            let corners = self.uv1[t as usize];
+            let Some(l) = line.in_uv(scene, t, corners, *uv) else {
                 continue;
             };
+            let distance = |bary: Vec2| {
+                let at = interpolate(corners[0], corners[1], corners[2], bary);
+                l[0] * at.x + l[1] * at.y + l[2]
+            };
+            let site = distance(*uv);
+            // The foot is found in barycentrics, where the texel's sample lives.
+            let front = slot < self.layer_texels;
+            let foot = line
+                .in_uv(scene, t, [Vec2::ZERO, Vec2::X, Vec2::Y], *uv)
+                .and_then(|b| crossings::foot(scene, t, front, &line, b, *uv))
+                .map(|(bary, _)| bary)
+                .filter(|&bary| distance(bary) < site);
             self.crossing_slot[slot] = self.crossing_lines.len() as u32;
-            self.crossing_lines.push(l);
+            self.crossing_lines.push(crossings::SampleCrossing {
+                line: l,
+                site,
+                foot: foot.map_or(site, distance),
+            });
+            self.foot_sites.push(foot);
         }
     }
 }
+
+/// How far (in texels) a buried texel's exit may lie: within its footprint (¾ of a texel
+/// reaches its corners' direction closely enough).
+const EXIT_REACH: f32 = 0.75;
 
 /// Lays out instance `i`: its TEXCOORD_1 when usable, else a generated atlas; then
 /// rasterises its triangles into texel owners and sample positions.
@@ -979,9 +1059,12 @@ fn dilate(values: &mut [Vec3], state: &mut [Burial], w: usize, h: usize, passes:
 
 /// Bilinear lookup with clamp-to-edge in stored texels, arithmetic identical to
 /// [`crate::texture::bilinear`] on the unpacked image (what the GPU sampler computes),
-/// except that texels `same_side(k)` rejects (a crossing separates them from the point
-/// looked up) are left out and the others' weights renormalised; where every texel is
-/// rejected the plain bilinear value is returned.
+/// except near crossings: `crossing(k)` gives texel k's crossing and the value at its
+/// foot, if it has one; texels whose crossing separates them from the point looked up
+/// are left out and the others' weights renormalised, and a texel whose line lies
+/// between it and the point takes the value linear from its foot to it
+/// ([`crossings::SampleCrossing::value`]). Where every texel is rejected the plain
+/// bilinear value is returned.
 #[inline]
 fn bilinear_packed(
     texels: &[StoredRgb],
@@ -989,7 +1072,7 @@ fn bilinear_packed(
     height: u32,
     uv: Vec2,
     scale: StoreScale,
-    same_side: impl Fn(usize) -> bool,
+    crossing: impl Fn(usize) -> Option<(crossings::SampleCrossing, Vec3)>,
 ) -> Vec3 {
     let x = (uv.x * width as f32 - 0.5).clamp(0.0, (width - 1) as f32);
     let y = (uv.y * height as f32 - 0.5).clamp(0.0, (height - 1) as f32);
@@ -1004,19 +1087,29 @@ fn bilinear_packed(
     ];
     let keys = taps.map(|(i, j, _)| (j * width + i) as usize);
     let values = keys.map(|k| scale.unpack(texels[k]));
-    let kept = std::array::from_fn::<bool, 4, _>(|n| taps[n].2 <= 0.0 || same_side(keys[n]));
+    let crossings = std::array::from_fn::<_, 4, _>(|n| {
+        (taps[n].2 > 0.0)
+            .then(|| crossing(keys[n]))
+            .flatten()
+            .filter(|(c, _)| !c.on_side(uv) || c.blends_at(uv))
+    });
     // Exactly the published texture's bilinear ([`crate::texture::bilinear`]).
     let plain = || {
         let top = values[0] * (1.0 - fx) + values[1] * fx;
         let bottom = values[2] * (1.0 - fx) + values[3] * fx;
         top * (1.0 - fy) + bottom * fy
     };
-    if kept.iter().all(|&k| k) {
+    if crossings.iter().all(Option::is_none) {
         return plain();
     }
     let (mut sum, mut weight) = (Vec3::ZERO, 0.0f32);
-    for n in (0..4).filter(|&n| kept[n] && taps[n].2 > 0.0) {
-        sum += values[n] * taps[n].2;
+    for n in (0..4).filter(|&n| taps[n].2 > 0.0) {
+        let value = match crossings[n] {
+            None => values[n],
+            Some((c, _)) if !c.on_side(uv) => continue,
+            Some((c, foot)) => c.value(uv, values[n], foot),
+        };
+        sum += value * taps[n].2;
         weight += taps[n].2;
     }
     if weight > 0.0 { sum / weight } else { plain() }
@@ -1075,6 +1168,30 @@ impl SurfaceCache for Lightmaps {
                 }
             }
         }
+        // Feet of crossed texels (module docs, Crossings): estimated once, with the most
+        // samples a texel may take (they are not filtered); without a plan, to the
+        // estimator's own bound.
+        let foot_budget = self.plan.map(|p| p.max);
+        self.feet = vec![Vec3::NAN; self.crossing_lines.len()];
+        self.foot_lines.clear();
+        for (slot, &c) in self.crossing_slot.iter().enumerate() {
+            let Some(foot) = self.foot_sites.get(c as usize).copied().flatten() else {
+                continue;
+            };
+            let (layer, i) = (slot / self.layer_texels, slot % self.layer_texels);
+            let texel = self.texel_point(scene, layer, i, 0, None);
+            points.push(SamplePoint {
+                site: SampleSite::Surface {
+                    triangle: self.owner[i],
+                    uv: foot,
+                    front: layer == 0,
+                },
+                key: splitmix64(texel.key ^ crossings::FOOT_KEY),
+                prior: None,
+                budget: foot_budget,
+            });
+            self.foot_lines.push(c);
+        }
         self.later_samples = budget.map_or(0, |b| {
             (LATER_ROUNDS_GUESS * b as f32 * self.slots.len() as f32) as u64
         });
@@ -1093,8 +1210,18 @@ impl SurfaceCache for Lightmaps {
         points: &[SamplePoint],
         estimates: &[Estimate],
     ) {
-        debug_assert_eq!(points.len(), self.slots.len());
+        debug_assert_eq!(points.len(), self.slots.len() + self.foot_lines.len());
         let total = self.layers * self.layer_texels;
+        let foot_estimates = &estimates[self.slots.len().min(estimates.len())..];
+        for (&line, e) in self.foot_lines.iter().zip(foot_estimates) {
+            self.foot_samples += e.samples as u64;
+            self.feet[line as usize] = if e.back_face_share > crossings::FOOT_BURIED_SHARE {
+                Vec3::NAN
+            } else {
+                e.value
+            };
+        }
+        self.foot_lines.clear();
         if self.merged.len() != total {
             self.merged = vec![TexelEstimate::default(); total];
             self.state = vec![Burial::Empty; total];
@@ -1176,17 +1303,20 @@ impl SurfaceCache for Lightmaps {
         let [a, b, c] = self.uv1[t];
         let at = interpolate(a, b, c, uv);
         let base = layer * self.layer_texels + m.offset;
-        let crossings = &self.crossing_slot;
-        let lines = &self.crossing_lines;
         bilinear_packed(
             self.texture_slice(layer, instance),
             m.width,
             m.height,
             at,
             self.scale,
-            |k| match crossings.get(base + k).copied() {
-                Some(c) if c != NONE => crossings::on_side(lines[c as usize], at),
-                _ => true,
+            |k| match self.crossing_slot.get(base + k).copied() {
+                Some(c) if c != NONE => Some((
+                    self.crossing_lines[c as usize],
+                    self.crossing_feet
+                        .get(c as usize)
+                        .map_or(Vec3::ZERO, |&f| self.scale.unpack(f)),
+                )),
+                _ => None,
             },
         )
     }
