@@ -41,13 +41,13 @@
 
 use crate::{bvh::TracedSceneResource, publish::PublishedLightmaps, scene_sync::SceneChanges};
 use bevy_ecs::prelude::*;
+use crossbeam_channel::{Receiver, TryRecvError, bounded};
 use glam::Vec3;
 use std::{
     collections::{BTreeSet, HashMap},
     sync::{
         Arc, Mutex,
         atomic::{AtomicBool, Ordering},
-        mpsc::{Receiver, TryRecvError, channel},
     },
     time::{Duration, Instant},
 };
@@ -253,8 +253,7 @@ struct Worker {
     id: u64,
     cancel: Arc<AtomicBool>,
     status: Arc<Mutex<BakeStatus>>,
-    /// (A `Mutex` only to make the resource `Sync`; one system reads it.)
-    result: Mutex<Receiver<Result<Finished, String>>>,
+    result: Receiver<Result<Finished, String>>,
 }
 
 /// Bake bookkeeping: the baseline, changes since it, and the bake in flight.
@@ -484,12 +483,12 @@ fn spawn_worker(mut run: Run, pool: Arc<rayon::ThreadPool>, points: usize) -> Wo
         incremental: run.incremental,
         ..Default::default()
     }));
-    let (tx, rx) = channel();
+    let (tx, rx) = bounded(1);
     let worker = Worker {
         id: run.id,
         cancel: cancel.clone(),
         status: status.clone(),
-        result: Mutex::new(rx),
+        result: rx,
     };
     std::thread::spawn(move || {
         let result = pool.install(|| {
@@ -528,11 +527,7 @@ pub fn step_bake(
         {
             *status = s.clone();
         }
-        let received = match w.result.lock() {
-            Ok(rx) => rx.try_recv(),
-            Err(_) => Err(TryRecvError::Disconnected),
-        };
-        match received {
+        match w.result.try_recv() {
             Err(TryRecvError::Empty) => {}
             Ok(result) => {
                 let id = w.id;
