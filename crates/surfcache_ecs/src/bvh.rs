@@ -1,5 +1,5 @@
 //! The BVH build: one background worker per world turns scene snapshots into
-//! [`TracedScene`]s, one at a time; the finished one replaces [`TracedSceneResource`]'s.
+//! [`TracedScene`]s, one at a time; the finished one replaces [`TracedSceneState`]'s.
 //!
 //! [`BvhBuilds`] owns the worker: a thread that starts with the first snapshot, builds one
 //! snapshot at a time, and ends when the resource is dropped (after the build under way,
@@ -9,7 +9,7 @@
 //! time, and the newest state is the one built next. [`start_bvh_build`] hands snapshots
 //! over; [`finish_bvh_build`] installs finished builds in snapshot order. A failed build
 //! (invalid or empty scene) or one that panicked keeps the last good scene and sets
-//! [`TracedSceneResource::error`].
+//! [`TracedSceneState::error`].
 
 use crate::{
     components::*,
@@ -28,7 +28,7 @@ use surfcache_trace::TracedScene;
 /// The traced scene built from the world's components, the entity of each of its
 /// instances, and what changed since the bake systems last took [`Self::changes`].
 #[derive(Resource, Default)]
-pub struct TracedSceneResource {
+pub struct TracedSceneState {
     scene: Option<Arc<TracedScene>>,
     /// `entities[k]` is the entity of the traced scene's instance `k`.
     pub entities: Vec<Entity>,
@@ -41,7 +41,7 @@ pub struct TracedSceneResource {
     pub error: Option<String>,
 }
 
-impl TracedSceneResource {
+impl TracedSceneState {
     /// The current traced scene, if one was built.
     pub fn scene(&self) -> Option<&Arc<TracedScene>> {
         self.scene.as_ref()
@@ -221,7 +221,7 @@ impl BvhBuilds {
 pub fn start_bvh_build(
     mut changes: ResMut<SceneChanges>,
     mut builds: ResMut<BvhBuilds>,
-    mut traced: ResMut<TracedSceneResource>,
+    mut traced: ResMut<TracedSceneState>,
     instances: InstanceQuery,
     lights: Query<&PunctualLight>,
     environment: Query<&EnvironmentLight>,
@@ -248,8 +248,8 @@ pub fn start_bvh_build(
 
 /// BVH build, part 2: installs finished builds in snapshot order. Changes of a snapshot
 /// that a newer one replaced, and of builds that failed, are carried into the newer one's
-/// [`TracedSceneResource::changes`].
-pub fn finish_bvh_build(mut builds: ResMut<BvhBuilds>, mut traced: ResMut<TracedSceneResource>) {
+/// [`TracedSceneState::changes`].
+pub fn finish_bvh_build(mut builds: ResMut<BvhBuilds>, mut traced: ResMut<TracedSceneState>) {
     loop {
         let received = match &builds.worker {
             Some(w) => w.results.try_recv(),

@@ -14,9 +14,9 @@ use surfcache_core::{
     scenes,
 };
 use surfcache_ecs::{
-    BakeConfig, BakeFinished, BakeMode, EnvironmentLight, InstanceName, PublishedLightmaps,
-    SurfaceCacheResource, SurfaceMaterial, SurfcachePlugin, TracedSceneResource, WorldTransform,
-    bvh::BvhBuilds, spawn_scene,
+    BakeConfig, BakeFinished, BakeMode, BakedSurfaceCache, BvhBuilds, EnvironmentLight,
+    InstanceName, PublishedLightmaps, SurfaceMaterial, SurfcachePlugin, TracedSceneState,
+    WorldTransform, spawn_scene,
 };
 use surfcache_trace::{EstimatorSettings, SurfacePoint, TracedScene};
 
@@ -66,7 +66,7 @@ fn bake(world: &mut World, schedule: &mut Schedule) -> BakeFinished {
 }
 
 fn baked(world: &World) -> (Arc<TracedScene>, Arc<Cache>) {
-    let r = world.resource::<SurfaceCacheResource>();
+    let r = world.resource::<BakedSurfaceCache>();
     (r.scene.clone().unwrap(), r.cache().unwrap().clone())
 }
 
@@ -319,7 +319,7 @@ fn edit_during_a_bake_never_publishes_the_old_scene() {
     );
     assert_eq!(
         done.generation,
-        world.resource::<TracedSceneResource>().generation
+        world.resource::<TracedSceneState>().generation
     );
     let (scene, cache) = baked(&world);
     let mut after = before.clone();
@@ -462,7 +462,7 @@ fn bvh_builds_skip_superseded_snapshots_and_end_on_the_newest() {
         builds.requested,
         builds.builds()
     );
-    let traced = world.resource::<TracedSceneResource>();
+    let traced = world.resource::<TracedSceneState>();
     assert!(traced.error.is_none());
     assert_eq!(traced.generation, edits);
     let mut last = scene.clone();
