@@ -39,8 +39,8 @@ use surfcache::{
         scenes,
     },
     ecs::{
-        BakeConfig, BakeFinished, InstanceName, SurfaceCacheResource, SurfcachePlugin,
-        WorldTransform, spawn_scene,
+        BakeConfig, BakeFinished, BakedSurfaceCache, InstanceName, SurfcachePlugin, WorldTransform,
+        spawn_scene,
     },
     io::{load_scene, read_environment_map},
     trace::TracedScene,
@@ -66,7 +66,7 @@ fn run_until_baked(world: &mut World, schedule: &mut Schedule) -> BakeFinished {
 }
 
 fn baked(world: &World) -> (Arc<TracedScene>, Arc<Cache>) {
-    let r = world.resource::<SurfaceCacheResource>();
+    let r = world.resource::<BakedSurfaceCache>();
     (r.scene.clone().unwrap(), r.cache().unwrap().clone())
 }
 

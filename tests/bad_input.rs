@@ -8,24 +8,13 @@
 
 mod common;
 
-use common::pack_glb;
+use common::{ASSETS, cornell_bin, cornell_json, mesh_index, pack_glb, stderr_of, temp_dir};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use surfcache::core::glam::Vec3;
 
 const SURFCACHE: &str = env!("CARGO_BIN_EXE_surfcache");
-const ASSETS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
-
-/// A fresh, empty directory for one test.
-fn temp_dir(test: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("bad_input")
-        .join(test);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// A points CSV with one point on the Cornell floor (both the built-in and the glTF box).
 fn points_csv(dir: &Path) -> PathBuf {
@@ -46,10 +35,6 @@ fn reference(scene: impl AsRef<std::ffi::OsStr>, points: &Path, extra: &[&str]) 
         .env("RUST_BACKTRACE", "1")
         .output()
         .expect("the surfcache binary runs")
-}
-
-fn stderr_of(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
 fn assert_no_panic(out: &Output) {
@@ -123,15 +108,6 @@ fn expect_clean_success(out: &Output) {
 
 // --- the Cornell box glTF, taken apart and put back together ---------------------------
 
-fn cornell_json() -> Value {
-    let text = std::fs::read_to_string(Path::new(ASSETS).join("cornell.gltf")).unwrap();
-    serde_json::from_str(&text).unwrap()
-}
-
-fn cornell_bin() -> Vec<u8> {
-    std::fs::read(Path::new(ASSETS).join("cornell.bin")).unwrap()
-}
-
 /// Triangles of the unmodified Cornell glTF, and of the named meshes in it.
 fn cornell_triangles() -> usize {
     let loaded = surfcache::io::load_gltf(&Path::new(ASSETS).join("cornell.gltf")).unwrap();
@@ -154,15 +130,6 @@ fn glb_of(doc: &Value, bin: &[u8]) -> Vec<u8> {
     let mut doc = doc.clone();
     doc["buffers"] = json!([{ "byteLength": bin.len() }]);
     pack_glb(&serde_json::to_vec(&doc).unwrap(), bin)
-}
-
-fn mesh_index(doc: &Value, name: &str) -> usize {
-    doc["meshes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .position(|m| m["name"] == name)
-        .unwrap_or_else(|| panic!("no mesh {name}"))
 }
 
 fn primitive(doc: &Value, mesh: &str) -> Value {

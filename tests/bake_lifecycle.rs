@@ -13,7 +13,7 @@
 
 mod common;
 
-use common::{CORNELL_FAST, expect_success};
+use common::{CORNELL_FAST, expect_success, temp_dir};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -29,16 +29,6 @@ const SLOW: [&str; 6] = [
     "--threads",
     "1",
 ];
-
-/// A fresh, empty directory for one test.
-fn temp_dir(test: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("bake_lifecycle")
-        .join(test);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 fn bake_command(out: &Path, options: &[&str]) -> Command {
     let mut command = Command::new(SURFCACHE);

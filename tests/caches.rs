@@ -23,7 +23,10 @@
 
 mod common;
 
-use common::{CORNELL_FAST, expect_success, lookup};
+use common::{
+    ASSETS, CORNELL_FAST, Points, assert_near, estimator_with, expect_success, grey, lookup,
+    stderr_of, temp_dir, tiled_floor,
+};
 use serde_json::Value;
 use std::f32::consts::PI;
 use std::path::{Path, PathBuf};
@@ -34,23 +37,18 @@ use surfcache::cache::{
     bake::{BakeJob, BakeSettings, DEFAULT_GATHER_PASSES},
 };
 use surfcache::core::{
-    Environment, EnvironmentMap, Instance, Light, Material, Mesh, Scene,
+    Environment, EnvironmentMap, Instance, Light, Mesh, Scene,
     geometry::orthonormal_basis,
     glam::Vec3,
-    scenes::{append, cuboid, quad},
+    scenes::{cuboid, quad},
 };
-use surfcache::trace::{EstimatorSettings, Sampler, TracedScene};
+use surfcache::trace::{EstimatorSettings, TracedScene};
 
 const SURFCACHE: &str = env!("CARGO_BIN_EXE_surfcache");
-const ASSETS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
 
 // ---------------------------------------------------------------------------------------
 // Helpers
 // ---------------------------------------------------------------------------------------
-
-fn grey(albedo: f32) -> Material {
-    Material::diffuse("grey", Vec3::splat(albedo))
-}
 
 fn scene(instances: Vec<Instance>, environment: Environment, lights: Vec<Light>) -> Scene {
     Scene {
@@ -58,19 +56,6 @@ fn scene(instances: Vec<Instance>, environment: Environment, lights: Vec<Light>)
         instances,
         lights,
         environment,
-    }
-}
-
-/// Adaptive `best` estimates; the floor ε is left to the job (1 % of the scene's mean
-/// irradiance).
-fn estimator(max_rel_error: f32, min_samples: u32, max_samples: u32) -> EstimatorSettings {
-    EstimatorSettings {
-        sampler: Sampler::Best,
-        max_rel_error,
-        min_samples,
-        max_samples,
-        floor: 0.0,
-        max_bounces: None,
     }
 }
 
@@ -101,30 +86,6 @@ fn bake(
     (outcome.cache().clone(), floor)
 }
 
-/// |got − expected| ≤ 4·rel·(expected + ε) + expected/1024 in every channel.
-#[track_caller]
-fn assert_near(got: Vec3, expected: Vec3, rel: f32, floor: f32, what: &str) {
-    for c in 0..3 {
-        let tol = 4.0 * rel * (expected[c] + floor) + expected[c] / 1024.0 + 1e-6;
-        assert!(
-            got.is_finite() && (got[c] - expected[c]).abs() <= tol,
-            "{what}: got {got}, expected {expected} (channel {c}, tolerance {tol})"
-        );
-    }
-}
-
-/// xorshift32 points for reproducible sampling in tests.
-struct Points(u32);
-
-impl Points {
-    fn next_f32(&mut self) -> f32 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 17;
-        self.0 ^= self.0 << 5;
-        (self.0 >> 8) as f32 / 16_777_216.0
-    }
-}
-
 /// A square of side `size` centred at the origin, facing `n`.
 fn square(name: &str, n: Vec3, size: f32) -> Mesh {
     let (t, b) = orthonormal_basis(n);
@@ -147,26 +108,12 @@ fn points_on_square(n: Vec3, size: f32, count: usize, seed: u32) -> Vec<Vec3> {
 
 // --- the command line ------------------------------------------------------------------
 
-/// A fresh, empty directory for one test.
-fn temp_dir(test: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("caches")
-        .join(test);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 fn surfcache(args: &[&str]) -> Output {
     Command::new(SURFCACHE)
         .args(args)
         .env("RUST_BACKTRACE", "1")
         .output()
         .expect("the surfcache binary runs")
-}
-
-fn stderr_of(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
 /// Non-zero exit, nothing on stdout, exactly one stderr line `error: …` holding `needle`.
@@ -241,7 +188,7 @@ fn plane_under_uniform_sky_gets_pi_l_from_every_bake_job() {
     for method in Method::ALL {
         let mut cache = CacheSettings::for_method(method);
         cache.set_density(16.0);
-        let (baked, floor) = bake(&traced, cache, estimator(rel, 64, 4096), 1);
+        let (baked, floor) = bake(&traced, cache, estimator_with(rel, 64, 4096, 0.0), 1);
         assert_eq!(baked.method(), method);
         assert!(floor > 0.0);
         for (k, x) in points_on_square(n, 2.0, 100, 0x5eed)
@@ -382,7 +329,7 @@ fn tilted_planes_under_sky_only_map_every_method() {
         for method in Method::ALL {
             let mut cache = CacheSettings::for_method(method);
             cache.set_density(16.0);
-            let (baked, floor) = bake(&traced, cache, estimator(rel, 64, 4096), 2);
+            let (baked, floor) = bake(&traced, cache, estimator_with(rel, 64, 4096, 0.0), 2);
             for (k, x) in points_on_square(n, 1.0, 40, 0x7117).into_iter().enumerate() {
                 for (side, expected) in [(n, front), (-n, back)] {
                     let e = lookup(baked.as_ref(), &traced, x, side);
@@ -398,28 +345,6 @@ fn tilted_planes_under_sky_only_map_every_method() {
 // ---------------------------------------------------------------------------------------
 // The shadow of a box under a directional light
 // ---------------------------------------------------------------------------------------
-
-/// A 4 m × 4 m floor of 0.25 m squares (two triangles each), facing up.
-fn tiled_floor(size: f32, cells: u32) -> Mesh {
-    let mut mesh = Mesh {
-        name: "floor".into(),
-        ..Default::default()
-    };
-    let s = size / cells as f32;
-    for i in 0..cells {
-        for j in 0..cells {
-            let (x, z) = (i as f32 * s, j as f32 * s);
-            let c = [
-                Vec3::new(x, 0.0, z),
-                Vec3::new(x + s, 0.0, z),
-                Vec3::new(x + s, 0.0, z + s),
-                Vec3::new(x, 0.0, z + s),
-            ];
-            append(&mut mesh, &quad("floor", c, Vec3::Y));
-        }
-    }
-    mesh
-}
 
 /// Whether the ray from `o` along `d` hits the box [lo, hi] (slab test, t > 0).
 fn ray_hits_box(o: Vec3, d: Vec3, lo: Vec3, hi: Vec3) -> bool {
@@ -500,7 +425,7 @@ fn box_shadow_under_directional_light_maps_and_lightmaps() {
         if method == Method::Lightmap {
             cache.set_density(16.0);
         }
-        let (baked, floor) = bake(&traced, cache, estimator(rel, 64, 512), 3);
+        let (baked, floor) = bake(&traced, cache, estimator_with(rel, 64, 512, 0.0), 3);
         for &x in &lit_points {
             let e = lookup(baked.as_ref(), &traced, x, Vec3::Y);
             assert_near(e, lit, rel, floor, &format!("{}: lit {x}", method.name()));

@@ -43,7 +43,7 @@
 
 mod common;
 
-use common::pack_glb;
+use common::{ASSETS, cornell_bin, cornell_json, mesh_index, pack_glb, temp_dir};
 use proptest::prelude::*;
 use proptest::sample::Index;
 use proptest::test_runner::{Config, RngSeed, TestCaseError, TestRunner};
@@ -56,8 +56,6 @@ use std::sync::{Mutex, MutexGuard, Once, OnceLock, PoisonError};
 use std::time::Instant;
 use surfcache::core::glam::{Vec2, Vec3};
 use surfcache::core::{AlphaMode, Light, Scene};
-
-const ASSETS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
 
 // --- panics and serial execution ------------------------------------------------------------
 
@@ -231,16 +229,6 @@ where
     let stats = stats.into_inner();
     stats.print(name, cases, started.elapsed().as_secs_f64(), 8);
     stats
-}
-
-/// A fresh directory for one fuzz target.
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("fuzz_loaders")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 /// An `IoError` message, which must be one printable line.
@@ -956,15 +944,6 @@ struct GltfSeed {
     bin: Vec<u8>,
 }
 
-fn cornell_json() -> Value {
-    let text = std::fs::read_to_string(Path::new(ASSETS).join("cornell.gltf")).unwrap();
-    serde_json::from_str(&text).unwrap()
-}
-
-fn cornell_bin() -> Vec<u8> {
-    std::fs::read(Path::new(ASSETS).join("cornell.bin")).unwrap()
-}
-
 /// Appends `data` to `bin` (4-byte aligned) as a new buffer view of buffer 0; its index.
 fn add_view(doc: &mut Value, bin: &mut Vec<u8>, data: &[u8]) -> usize {
     bin.resize(bin.len().next_multiple_of(4), 0);
@@ -978,15 +957,6 @@ fn add_accessor(doc: &mut Value, accessor: Value) -> usize {
     let accessors = doc["accessors"].as_array_mut().unwrap();
     accessors.push(accessor);
     accessors.len() - 1
-}
-
-fn mesh_index(doc: &Value, name: &str) -> usize {
-    doc["meshes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .position(|m| m["name"] == name)
-        .unwrap()
 }
 
 /// Accessor `attribute` (or "indices") of the first primitive of mesh `name`.

@@ -1,9 +1,13 @@
-//! Helpers shared by the root test binaries: scenes, complete bakes as the product runs
-//! them, lookups at world points, closed forms, the fast Cornell settings of the CLI tests
-//! the check that a run of the `surfcache` binary succeeded, and GLB packing.
+//! Helpers shared by the root test binaries: scenes and meshes, complete bakes as the
+//! product runs them, estimator settings, lookups at world points, a reproducible random
+//! stream, tolerance checks, closed forms, the fast Cornell settings of the CLI tests, the
+//! check that a run of the `surfcache` binary succeeded, a fresh directory per test, and
+//! the Cornell glTF asset taken apart and packed as GLB.
 #![allow(dead_code)]
 
+use serde_json::Value;
 use std::f32::consts::PI;
+use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::sync::Arc;
 use surfcache::cache::{
@@ -11,8 +15,9 @@ use surfcache::cache::{
     bake::{BakeJob, BakeSettings},
 };
 use surfcache::core::{
-    Environment, Instance, Material, Mesh, Scene,
+    Environment, Instance, Light, Material, Mesh, Scene,
     glam::{Affine3A, Vec2, Vec3},
+    scenes::{append, quad},
 };
 use surfcache::trace::{EstimatorSettings, Sampler, TracedScene};
 
@@ -33,22 +38,106 @@ pub fn instance(mesh: Mesh, material: Material) -> Instance {
 
 /// A traced scene of `instances` under `environment`.
 pub fn traced(instances: Vec<Instance>, environment: Environment) -> TracedScene {
+    traced_with_lights(instances, environment, Vec::new())
+}
+
+/// A traced scene of `instances` and punctual `lights` under `environment`.
+pub fn traced_with_lights(
+    instances: Vec<Instance>,
+    environment: Environment,
+    lights: Vec<Light>,
+) -> TracedScene {
     TracedScene::new(&Scene {
         name: "test".into(),
         instances,
+        lights,
         environment,
-        ..Default::default()
     })
     .expect("a valid scene")
 }
 
-/// Adaptive `best` estimates with bound `max_rel_error` (the job fills in the floor).
+/// A square floor of side `size` in the plane y = 0 from the origin towards +X and +Z,
+/// facing +Y, made of `cells` × `cells` quads (the cache crate's tests have the same
+/// helper, with the same parameters).
+pub fn tiled_floor(size: f32, cells: u32) -> Mesh {
+    let mut mesh = Mesh {
+        name: "floor".into(),
+        ..Default::default()
+    };
+    let s = size / cells as f32;
+    for i in 0..cells {
+        for j in 0..cells {
+            let (x, z) = (i as f32 * s, j as f32 * s);
+            let c = [
+                Vec3::new(x, 0.0, z),
+                Vec3::new(x + s, 0.0, z),
+                Vec3::new(x + s, 0.0, z + s),
+                Vec3::new(x, 0.0, z + s),
+            ];
+            append(&mut mesh, &quad("floor", c, Vec3::Y));
+        }
+    }
+    mesh
+}
+
+/// Adaptive `best` estimates with bound `max_rel_error` and the default sample limits
+/// (the job fills in the floor).
 pub fn estimator(max_rel_error: f32) -> EstimatorSettings {
+    let d = EstimatorSettings::default();
+    estimator_with(max_rel_error, d.min_samples, d.max_samples, 0.0)
+}
+
+/// Adaptive `best` estimates with bound `max_rel_error`, between `min_samples` and
+/// `max_samples` samples, and absolute floor `floor` (0: a bake job measures it).
+pub fn estimator_with(
+    max_rel_error: f32,
+    min_samples: u32,
+    max_samples: u32,
+    floor: f32,
+) -> EstimatorSettings {
     EstimatorSettings {
         sampler: Sampler::Best,
         max_rel_error,
-        floor: 0.0,
-        ..Default::default()
+        min_samples,
+        max_samples,
+        floor,
+        max_bounces: None,
+    }
+}
+
+/// xorshift32: reproducible test points.
+pub struct Points(pub u32);
+
+impl Points {
+    pub fn next_f32(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 17;
+        self.0 ^= self.0 << 5;
+        (self.0 >> 8) as f32 / 16_777_216.0
+    }
+
+    /// Uniform barycentrics (u, v) in the triangle.
+    pub fn barycentrics(&mut self) -> Vec2 {
+        let (u, v) = (self.next_f32(), self.next_f32());
+        if u + v > 1.0 {
+            Vec2::new(1.0 - u, 1.0 - v)
+        } else {
+            Vec2::new(u, v)
+        }
+    }
+}
+
+/// `got` is finite and |got − expected| ≤ 4·rel·(expected + floor) + expected/1024 + 10⁻⁶
+/// in every channel: four standard errors of an estimate stopped at relative error `rel`
+/// with absolute floor `floor`, plus half-float rounding.
+#[track_caller]
+pub fn assert_near(got: Vec3, expected: Vec3, rel: f32, floor: f32, what: &str) {
+    for c in 0..3 {
+        let tol = 4.0 * rel * (expected[c] + floor) + expected[c] / 1024.0 + 1e-6;
+        assert!(
+            got.is_finite() && (got[c] - expected[c]).abs() <= tol,
+            "{what}: got {got}, expected {expected} (channel {c}, tolerance {tol})"
+        );
     }
 }
 
@@ -155,6 +244,46 @@ pub const CORNELL_FAST: [&str; 12] = [
     "--threads",
     "2",
 ];
+
+/// A run's stderr as text.
+pub fn stderr_of(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A fresh, empty directory for one test, in the test binary's own folder of cargo's
+/// temporary directory.
+pub fn temp_dir(test: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(env!("CARGO_CRATE_NAME"))
+        .join(test);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The repository's `assets` folder.
+pub const ASSETS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
+
+/// The Cornell box glTF (`assets/cornell.gltf`) as JSON.
+pub fn cornell_json() -> Value {
+    let text = std::fs::read_to_string(Path::new(ASSETS).join("cornell.gltf")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+/// The Cornell box glTF's binary buffer (`assets/cornell.bin`).
+pub fn cornell_bin() -> Vec<u8> {
+    std::fs::read(Path::new(ASSETS).join("cornell.bin")).unwrap()
+}
+
+/// The index of the mesh called `name` in glTF document `doc`.
+pub fn mesh_index(doc: &Value, name: &str) -> usize {
+    doc["meshes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .position(|m| m["name"] == name)
+        .unwrap_or_else(|| panic!("no mesh {name}"))
+}
 
 /// The run exited 0; otherwise fails showing its status and stderr.
 #[track_caller]

@@ -2,6 +2,8 @@
 //! and generated charts), conservative footprints, leak-free and buried texels,
 //! determinism.
 
+mod common;
+
 use glam::{Affine3A, Vec2, Vec3};
 use std::{collections::HashMap, f32::consts::PI, sync::Arc};
 use surfcache_cache::{
@@ -36,16 +38,9 @@ fn scene(instances: Vec<Instance>, sky: Vec3) -> TracedScene {
     .unwrap()
 }
 
-/// Adaptive estimates to a 2 % bound.
+/// Adaptive `best` estimates to a 2 % bound, 64 to 4096 samples, with floor `floor`.
 fn estimator(floor: f32) -> EstimatorSettings {
-    EstimatorSettings {
-        sampler: Sampler::Best,
-        max_rel_error: 0.02,
-        min_samples: 64,
-        max_samples: 4096,
-        floor,
-        max_bounces: None,
-    }
+    common::estimator(Sampler::Best, 0.02, 64, 4096, floor)
 }
 
 fn settings(texels_per_metre: f32) -> LightmapSettings {

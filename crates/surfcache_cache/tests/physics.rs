@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{PI, Points, estimator, locate};
+use common::{PI, Points, estimator, locate, tiled_floor};
 use surfcache_cache::{
     SurfaceCache,
     bake::{Baker, FLOOR_FRACTION, bake_to_convergence, mean_irradiance},
@@ -18,7 +18,7 @@ use surfcache_cache::{
 use surfcache_core::{
     Environment, Instance, Light, Material, Mesh, Scene,
     glam::{Vec2, Vec3},
-    scenes::{append, cornell, cuboid, quad},
+    scenes::{cornell, cuboid, quad},
 };
 use surfcache_trace::{Sampler, TracedScene};
 
@@ -252,28 +252,6 @@ fn furnace_box_matches_geometric_series() {
     );
 }
 
-/// A 4 m × 4 m floor of `cells × cells` squares (two triangles each), facing up.
-fn tiled_floor(cells: u32, size: f32) -> Mesh {
-    let mut mesh = Mesh {
-        name: "floor".into(),
-        ..Default::default()
-    };
-    let s = size / cells as f32;
-    for i in 0..cells {
-        for j in 0..cells {
-            let (x, z) = (i as f32 * s, j as f32 * s);
-            let c = [
-                Vec3::new(x, 0.0, z),
-                Vec3::new(x + s, 0.0, z),
-                Vec3::new(x + s, 0.0, z + s),
-                Vec3::new(x, 0.0, z + s),
-            ];
-            append(&mut mesh, &quad("floor", c, Vec3::Y));
-        }
-    }
-    mesh
-}
-
 /// A floor lit straight down by a directional light of 3 W/m², with a black square
 /// blocker 1 m above it casting the hard shadow `lo < x, z < hi`.
 fn shadow_scene(floor: Mesh, lo: Vec2, hi: Vec2) -> Scene {
@@ -305,7 +283,7 @@ fn shadow_scene(floor: Mesh, lo: Vec2, hi: Vec2) -> Scene {
 #[test]
 fn refinement_follows_the_shadow_edge_only() {
     let (lo, hi) = (Vec2::splat(1.1), Vec2::splat(2.9));
-    let scene = shadow_scene(tiled_floor(16, 4.0), lo, hi);
+    let scene = shadow_scene(tiled_floor(4.0, 16), lo, hi);
     let traced = TracedScene::new(&scene).unwrap();
     let floor_triangles = traced.instance_triangles[0].clone();
     let settings = estimator(Sampler::Best, 0.05, 16, 64, 0.03);

@@ -14,8 +14,7 @@ use surfcache_trace::{EstimatorSettings, Sampler};
 
 use crate::scene_args::LoadedWorld;
 use surfcache_ecs::{
-    BakeConfig, BakeStatus, BakeWaitError, PublishedLightmaps, SurfaceCacheResource,
-    SurfcachePlugin,
+    BakeConfig, BakeStatus, BakeWaitError, BakedSurfaceCache, PublishedLightmaps, SurfcachePlugin,
 };
 
 /// Parses a method name, listing the known ones on error.
@@ -267,7 +266,7 @@ pub fn bake(
         Ok(done) => {
             let outcome = loaded
                 .world
-                .resource::<SurfaceCacheResource>()
+                .resource::<BakedSurfaceCache>()
                 .outcome
                 .clone()
                 .context("internal error: the bake did not finish")?;

@@ -6,7 +6,7 @@ use clap::Args;
 use glam::Vec3;
 use std::{path::PathBuf, sync::Arc};
 use surfcache_core::{Environment, Scene};
-use surfcache_ecs::{BakeConfig, SurfcachePlugin, TracedSceneResource, spawn_scene};
+use surfcache_ecs::{BakeConfig, SurfcachePlugin, TracedSceneState, spawn_scene};
 use surfcache_trace::TracedScene;
 
 /// Environment options (docs/cli.md).
@@ -119,7 +119,7 @@ impl LoadedWorld {
         // The BVH is built in the background; wait for it.
         loop {
             SurfcachePlugin::update(&mut world, &mut schedule);
-            let resource = world.resource::<TracedSceneResource>();
+            let resource = world.resource::<TracedSceneState>();
             if let Some(e) = &resource.error {
                 return Err(anyhow!("scene '{scene_arg}': {e}"));
             }
@@ -128,7 +128,7 @@ impl LoadedWorld {
             }
             std::thread::sleep(std::time::Duration::from_millis(1));
         }
-        let resource = world.resource::<TracedSceneResource>();
+        let resource = world.resource::<TracedSceneState>();
         // Keep the plain scene's instances in the traced scene's (entity) order.
         let index: std::collections::HashMap<_, _> =
             spawned.iter().enumerate().map(|(i, e)| (*e, i)).collect();
@@ -151,7 +151,7 @@ impl LoadedWorld {
     /// The traced scene the BVH system built.
     pub fn traced(&self) -> Result<Arc<TracedScene>> {
         self.world
-            .resource::<TracedSceneResource>()
+            .resource::<TracedSceneState>()
             .scene()
             .cloned()
             .context("the scene was not built")

@@ -39,15 +39,19 @@
 //! A superseded bake never publishes: results carry the generation of the scene snapshot
 //! they were baked from, and only the newest is accepted.
 
-use crate::{bvh::TracedSceneResource, publish::PublishedLightmaps, scene_sync::SceneChanges};
+use crate::{
+    bvh::TracedSceneState,
+    publish::{PendingPublish, PublishedLightmaps},
+    scene_sync::SceneChanges,
+};
 use bevy_ecs::prelude::*;
+use crossbeam_channel::{Receiver, TryRecvError, bounded};
 use glam::Vec3;
 use std::{
     collections::{BTreeSet, HashMap},
     sync::{
         Arc, Mutex,
         atomic::{AtomicBool, Ordering},
-        mpsc::{Receiver, TryRecvError, channel},
     },
     time::{Duration, Instant},
 };
@@ -124,7 +128,7 @@ pub struct BakeStatus {
 
 /// The finished surface cache of the newest baked scene.
 #[derive(Resource, Default, Clone)]
-pub struct SurfaceCacheResource {
+pub struct BakedSurfaceCache {
     /// The bake (every pass; the final cache is [`BakeOutcome::cache`]).
     pub outcome: Option<BakeOutcome>,
     /// The traced scene it was baked over, and the entity of each of its instances.
@@ -134,7 +138,7 @@ pub struct SurfaceCacheResource {
     pub generation: u64,
 }
 
-impl SurfaceCacheResource {
+impl BakedSurfaceCache {
     /// The final cache, if a bake finished.
     pub fn cache(&self) -> Option<&Arc<Cache>> {
         self.outcome.as_ref().map(|o| o.cache())
@@ -179,8 +183,9 @@ struct Baseline {
     published: Arc<PublishedLightmaps>,
 }
 
-/// A finished bake, ready to publish.
-pub(crate) struct Finished {
+/// A finished bake's results (the cache, its scene, the textures per entity), on their
+/// way through [`PendingPublish`] to [`publish`](crate::publish::publish).
+pub(crate) struct BakeResult {
     pub generation: u64,
     pub incremental: bool,
     pub seconds: f64,
@@ -204,7 +209,7 @@ struct Run {
 }
 
 impl Run {
-    fn finish(self) -> Result<Finished, String> {
+    fn finish(self) -> Result<BakeResult, String> {
         let seconds = self.started.elapsed().as_secs_f64();
         let outcome = self
             .job
@@ -217,7 +222,7 @@ impl Run {
             self.generation,
             self.previous.as_deref(),
         );
-        Ok(Finished {
+        Ok(BakeResult {
             generation: self.generation,
             incremental: self.incremental,
             seconds,
@@ -253,8 +258,7 @@ struct Worker {
     id: u64,
     cancel: Arc<AtomicBool>,
     status: Arc<Mutex<BakeStatus>>,
-    /// (A `Mutex` only to make the resource `Sync`; one system reads it.)
-    result: Mutex<Receiver<Result<Finished, String>>>,
+    result: Receiver<Result<BakeResult, String>>,
 }
 
 /// Bake bookkeeping: the baseline, changes since it, and the bake in flight.
@@ -404,9 +408,9 @@ fn plan(
 pub fn start_bake(
     config: Res<BakeConfig>,
     mut baking: ResMut<Baking>,
-    mut traced: ResMut<TracedSceneResource>,
+    mut traced: ResMut<TracedSceneState>,
     mut status: ResMut<BakeStatus>,
-    mut finished: ResMut<crate::publish::FinishedBake>,
+    mut pending: ResMut<PendingPublish>,
 ) {
     // A new scene, or new settings (or baking switched on), start a bake.
     let new_scene = traced.generation != baking.started;
@@ -430,7 +434,7 @@ pub fn start_bake(
             if let Some(base) = baking.baseline.as_mut() {
                 base.scene = scene;
                 base.entities = entities;
-                finished.0 = Some(Finished {
+                pending.0 = Some(BakeResult {
                     generation: traced.generation,
                     incremental: true,
                     seconds: 0.0,
@@ -484,12 +488,12 @@ fn spawn_worker(mut run: Run, pool: Arc<rayon::ThreadPool>, points: usize) -> Wo
         incremental: run.incremental,
         ..Default::default()
     }));
-    let (tx, rx) = channel();
+    let (tx, rx) = bounded(1);
     let worker = Worker {
         id: run.id,
         cancel: cancel.clone(),
         status: status.clone(),
-        result: Mutex::new(rx),
+        result: rx,
     };
     std::thread::spawn(move || {
         let result = pool.install(|| {
@@ -520,7 +524,7 @@ pub fn step_bake(
     config: Res<BakeConfig>,
     mut baking: ResMut<Baking>,
     mut status: ResMut<BakeStatus>,
-    mut finished: ResMut<crate::publish::FinishedBake>,
+    mut pending: ResMut<PendingPublish>,
 ) {
     if let Some(w) = &baking.worker {
         if let Ok(s) = w.status.lock()
@@ -528,16 +532,12 @@ pub fn step_bake(
         {
             *status = s.clone();
         }
-        let received = match w.result.lock() {
-            Ok(rx) => rx.try_recv(),
-            Err(_) => Err(TryRecvError::Disconnected),
-        };
-        match received {
+        match w.result.try_recv() {
             Err(TryRecvError::Empty) => {}
             Ok(result) => {
                 let id = w.id;
                 baking.worker = None;
-                accept(&mut baking, &mut status, &mut finished, id, result);
+                accept(&mut baking, &mut status, &mut pending, id, result);
             }
             Err(TryRecvError::Disconnected) => {
                 let id = w.id;
@@ -545,7 +545,7 @@ pub fn step_bake(
                 accept(
                     &mut baking,
                     &mut status,
-                    &mut finished,
+                    &mut pending,
                     id,
                     Err("internal error: the bake thread panicked".into()),
                 );
@@ -569,7 +569,7 @@ pub fn step_bake(
     if done && let Some(run) = baking.foreground.take().and_then(|r| r.into_inner().ok()) {
         let id = run.id;
         let result = run.finish();
-        accept(&mut baking, &mut status, &mut finished, id, result);
+        accept(&mut baking, &mut status, &mut pending, id, result);
     }
 }
 
@@ -577,9 +577,9 @@ pub fn step_bake(
 fn accept(
     baking: &mut Baking,
     status: &mut BakeStatus,
-    finished: &mut crate::publish::FinishedBake,
+    pending: &mut PendingPublish,
     id: u64,
-    result: Result<Finished, String>,
+    result: Result<BakeResult, String>,
 ) {
     if id != baking.bake_id {
         return;
@@ -598,7 +598,7 @@ fn accept(
             });
             baking.changed.clear();
             baking.global = false;
-            finished.0 = Some(f);
+            pending.0 = Some(f);
         }
         Err(e) => {
             status.running = false;

@@ -3,12 +3,23 @@
 //! The scene *is* the ECS world: every mesh instance is an entity with [`MeshGeometry`],
 //! [`SurfaceMaterial`] and [`WorldTransform`]; punctual lights carry [`PunctualLight`];
 //! the sky is an entity with [`EnvironmentLight`]. [`SurfcachePlugin::build`] registers the
-//! systems in ordered [`SurfcacheSet`]s: scene sync → BVH build → invalidation → bake step
-//! → publish. The BVH build and the bake run in the background; the finished surface
-//! cache lands in [`SurfaceCacheResource`], its textures per entity in
+//! systems in the ordered sets of [`SurfcacheSystems`]: scene sync → BVH build →
+//! invalidation → bake step → publish. The BVH build and the bake run in the background;
+//! the finished surface cache lands in [`BakedSurfaceCache`], its textures per entity in
 //! [`PublishedLightmaps`], and a [`BakeFinished`] message says so. Edits re-bake
 //! incrementally ([`baking`] documents the policy). Systems are thin: they move data
 //! between components, resources and the ECS-free math of the other crates.
+//!
+//! What each module owns:
+//! - [`components`]: the scene components.
+//! - [`scene_sync`]: change detection ([`SceneChanges`]) and the plain-scene snapshot.
+//! - [`bvh`]: the BVH worker ([`BvhBuilds`]) and the current traced scene
+//!   ([`TracedSceneState`]).
+//! - [`baking`]: bake settings ([`BakeConfig`]), progress ([`BakeStatus`]), the baseline
+//!   and the bake in flight ([`Baking`]), and the finished cache ([`BakedSurfaceCache`]).
+//! - [`publish`]: the textures per entity ([`PublishedLightmaps`]) and the
+//!   [`BakeFinished`] message.
+//! - [`plugin`]: registration ([`SurfcachePlugin`], [`SurfcacheSystems`]).
 //!
 //! ```
 //! use bevy_ecs::prelude::*;
@@ -42,11 +53,11 @@ pub mod plugin;
 pub mod publish;
 pub mod scene_sync;
 
-pub use baking::{BakeConfig, BakeMode, BakeStatus, Baking, SurfaceCacheResource};
-pub use bvh::TracedSceneResource;
+pub use baking::{BakeConfig, BakeMode, BakeStatus, BakedSurfaceCache, Baking};
+pub use bvh::{BvhBuilds, TracedSceneState};
 pub use components::{
     EnvironmentLight, InstanceName, MeshGeometry, PunctualLight, SurfaceMaterial, WorldTransform,
 };
-pub use plugin::{BakeWaitError, SurfcachePlugin, SurfcacheSet, spawn_scene};
+pub use plugin::{BakeWaitError, SurfcachePlugin, SurfcacheSystems, spawn_scene};
 pub use publish::{BakeFinished, EntityLightmap, PublishedLightmaps};
 pub use scene_sync::SceneChanges;

@@ -9,7 +9,7 @@ use surfcache_core::Scene;
 
 /// Ordered stages of one surfcache update.
 #[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum SurfcacheSet {
+pub enum SurfcacheSystems {
     /// Change detection on scene components; starting background BVH builds.
     SceneSync,
     /// Installing finished BVH builds.
@@ -46,11 +46,11 @@ impl SurfcachePlugin {
         }
     }
 
-    /// Adds the resources to `world` and the systems to `schedule`, in [`SurfcacheSet`] order.
+    /// Adds the resources to `world` and the systems to `schedule`, in [`SurfcacheSystems`] order.
     pub fn build(&self, world: &mut World, schedule: &mut Schedule) {
         self.insert_resources(world);
         MessageRegistry::register_message::<BakeFinished>(world);
-        schedule.add_systems(message_update_system.before(SurfcacheSet::SceneSync));
+        schedule.add_systems(message_update_system.before(SurfcacheSystems::SceneSync));
         Self::add_systems(schedule);
     }
 
@@ -64,34 +64,34 @@ impl SurfcachePlugin {
         }
         world.init_resource::<SceneChanges>();
         world.init_resource::<BvhBuilds>();
-        world.init_resource::<TracedSceneResource>();
+        world.init_resource::<TracedSceneState>();
         world.init_resource::<Baking>();
         world.init_resource::<BakeStatus>();
-        world.init_resource::<FinishedBake>();
-        world.init_resource::<SurfaceCacheResource>();
+        world.init_resource::<PendingPublish>();
+        world.init_resource::<BakedSurfaceCache>();
         world.init_resource::<PublishedLightmaps>();
     }
 
-    /// The systems, in [`SurfcacheSet`] order (messages are advanced by the caller).
+    /// The systems, in [`SurfcacheSystems`] order (messages are advanced by the caller).
     fn add_systems(schedule: &mut Schedule) {
         schedule.configure_sets(
             (
-                SurfcacheSet::SceneSync,
-                SurfcacheSet::Bvh,
-                SurfcacheSet::Invalidate,
-                SurfcacheSet::Bake,
-                SurfcacheSet::Publish,
+                SurfcacheSystems::SceneSync,
+                SurfcacheSystems::Bvh,
+                SurfcacheSystems::Invalidate,
+                SurfcacheSystems::Bake,
+                SurfcacheSystems::Publish,
             )
                 .chain(),
         );
         schedule.add_systems((
             (detect_scene_changes, start_bvh_build)
                 .chain()
-                .in_set(SurfcacheSet::SceneSync),
-            finish_bvh_build.in_set(SurfcacheSet::Bvh),
-            start_bake.in_set(SurfcacheSet::Invalidate),
-            step_bake.in_set(SurfcacheSet::Bake),
-            publish.in_set(SurfcacheSet::Publish),
+                .in_set(SurfcacheSystems::SceneSync),
+            finish_bvh_build.in_set(SurfcacheSystems::Bvh),
+            start_bake.in_set(SurfcacheSystems::Invalidate),
+            step_bake.in_set(SurfcacheSystems::Bake),
+            publish.in_set(SurfcacheSystems::Publish),
         ));
     }
 
@@ -122,7 +122,7 @@ impl SurfcachePlugin {
             if let Some(e) = &world.resource::<BakeStatus>().error {
                 return Err(BakeWaitError::Failed(e.clone()));
             }
-            if let Some(e) = &world.resource::<TracedSceneResource>().error {
+            if let Some(e) = &world.resource::<TracedSceneState>().error {
                 return Err(BakeWaitError::Failed(e.clone()));
             }
             if !on_frame(world) {

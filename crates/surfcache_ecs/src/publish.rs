@@ -1,5 +1,9 @@
 //! Publishing: the finished bake's irradiance textures per entity, as a resource.
 //!
+//! This module owns [`PublishedLightmaps`], the [`BakeFinished`] message and the
+//! [`PendingPublish`] slot that [`publish`] empties into them and into
+//! [`BakedSurfaceCache`].
+//!
 //! [`PublishedLightmaps`] holds, for every mesh entity, linear-RGB irradiance textures
 //! (W/m²) with the UV1 coordinates and UV rectangle that address them — what Bevy's
 //! `Lightmap` takes (image, `uv_rect`, the mesh's UV_1). It changes (Bevy change
@@ -7,7 +11,7 @@
 //! scene generations. An entity's [`EntityLightmap::version`] is the generation at which
 //! its textures last changed, so consumers re-upload only those.
 
-use crate::baking::{Finished, SurfaceCacheResource};
+use crate::baking::{BakeResult, BakedSurfaceCache};
 use bevy_ecs::prelude::*;
 use std::{collections::HashMap, sync::Arc};
 use surfcache_cache::IrradianceTexture;
@@ -98,7 +102,8 @@ fn same_texture(a: &Option<Arc<IrradianceTexture>>, b: &Option<Arc<IrradianceTex
     }
 }
 
-/// Sent when a bake or re-bake was published.
+/// The message sent when a bake or re-bake was published: its results are then in
+/// [`BakedSurfaceCache`] and [`PublishedLightmaps`].
 #[derive(Message, Clone, Debug, PartialEq)]
 pub struct BakeFinished {
     /// Scene generation it was baked from.
@@ -113,19 +118,20 @@ pub struct BakeFinished {
     pub removed: Vec<Entity>,
 }
 
-/// A finished bake waiting for [`publish`].
+/// The hand-over from the bake systems to [`publish`]: the newest finished bake's results
+/// (`BakeResult`), not published yet. [`publish`] empties it and sends [`BakeFinished`].
 #[derive(Resource, Default)]
-pub struct FinishedBake(pub(crate) Option<Finished>);
+pub struct PendingPublish(pub(crate) Option<BakeResult>);
 
-/// Publish: swaps a finished bake into [`SurfaceCacheResource`] and
+/// Publish: swaps a finished bake into [`BakedSurfaceCache`] and
 /// [`PublishedLightmaps`] and sends [`BakeFinished`].
 pub fn publish(
-    mut finished: ResMut<FinishedBake>,
-    mut cache: ResMut<SurfaceCacheResource>,
+    mut pending: ResMut<PendingPublish>,
+    mut cache: ResMut<BakedSurfaceCache>,
     mut lightmaps: ResMut<PublishedLightmaps>,
     mut messages: MessageWriter<BakeFinished>,
 ) {
-    let Some(f) = finished.0.take() else {
+    let Some(f) = pending.0.take() else {
         return;
     };
     let published = Arc::unwrap_or_clone(f.published);
@@ -155,7 +161,7 @@ pub fn publish(
         .collect();
     removed.sort();
     *lightmaps = published;
-    *cache = SurfaceCacheResource {
+    *cache = BakedSurfaceCache {
         outcome: Some(f.outcome),
         scene: Some(f.scene),
         entities: f.entities,

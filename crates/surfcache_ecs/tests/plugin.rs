@@ -1,21 +1,22 @@
 //! The plugin end to end: background bakes, incremental re-bakes after each kind of edit
 //! (checked against from-scratch bakes of the edited scene), removal, superseded bakes,
-//! and independence from frame pacing.
+//! independence from frame pacing, and BVH builds that keep only the newest waiting
+//! snapshot.
 
 use bevy_ecs::prelude::*;
 use glam::{Affine3A, Vec3};
 use std::{sync::Arc, time::Duration};
 use surfcache_cache::{Cache, CacheSettings, Method, SurfaceCache, bake::BakeSettings};
 use surfcache_core::{
-    Environment, Material, Scene,
+    Environment, Instance, Material, Mesh, Scene,
     geometry::to_world,
     sampling::{Rng, uniform_hemisphere},
     scenes,
 };
 use surfcache_ecs::{
-    BakeConfig, BakeFinished, BakeMode, EnvironmentLight, InstanceName, PublishedLightmaps,
-    SurfaceCacheResource, SurfaceMaterial, SurfcachePlugin, TracedSceneResource, WorldTransform,
-    spawn_scene,
+    BakeConfig, BakeFinished, BakeMode, BakedSurfaceCache, BvhBuilds, EnvironmentLight,
+    InstanceName, PublishedLightmaps, SurfaceMaterial, SurfcachePlugin, TracedSceneState,
+    WorldTransform, spawn_scene,
 };
 use surfcache_trace::{EstimatorSettings, SurfacePoint, TracedScene};
 
@@ -65,7 +66,7 @@ fn bake(world: &mut World, schedule: &mut Schedule) -> BakeFinished {
 }
 
 fn baked(world: &World) -> (Arc<TracedScene>, Arc<Cache>) {
-    let r = world.resource::<SurfaceCacheResource>();
+    let r = world.resource::<BakedSurfaceCache>();
     (r.scene.clone().unwrap(), r.cache().unwrap().clone())
 }
 
@@ -318,7 +319,7 @@ fn edit_during_a_bake_never_publishes_the_old_scene() {
     );
     assert_eq!(
         done.generation,
-        world.resource::<TracedSceneResource>().generation
+        world.resource::<TracedSceneState>().generation
     );
     let (scene, cache) = baked(&world);
     let mut after = before.clone();
@@ -386,4 +387,109 @@ fn settings_changes_rebake_and_unchanged_settings_republish() {
     assert_eq!(other.updated.len(), scene.instances.len());
     let (_, cache) = baked(&world);
     assert_eq!(cache.method(), Method::IrradianceMap);
+}
+
+/// A square panel of `n` × `n` quads (2 n² triangles) just below the Cornell box's
+/// ceiling, facing down: enough triangles that each BVH build takes a while.
+fn dense_panel(n: u32) -> Mesh {
+    let step = 0.5 / n as f32;
+    let mut positions = Vec::new();
+    for i in 0..=n {
+        for j in 0..=n {
+            positions.push(Vec3::new(
+                -0.25 + step * i as f32,
+                0.9,
+                -0.25 + step * j as f32,
+            ));
+        }
+    }
+    let v = |i: u32, j: u32| i * (n + 1) + j;
+    let mut indices = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            indices.push([v(i, j), v(i + 1, j), v(i + 1, j + 1)]);
+            indices.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
+        }
+    }
+    Mesh::new("dense_panel", positions, indices)
+}
+
+fn place_block(world: &mut World, z: f32) {
+    let e = entity_named(world, "short_block");
+    world.get_mut::<WorldTransform>(e).unwrap().0 =
+        Affine3A::from_translation(Vec3::new(0.0, 0.0, z));
+}
+
+/// Snapshots that arrive while a BVH build runs replace one another: the worker builds
+/// fewer scenes than it was sent, and the traced scene ends as the last snapshot.
+#[test]
+fn bvh_builds_skip_superseded_snapshots_and_end_on_the_newest() {
+    let mut scene = scenes::cornell();
+    let grey = Arc::new(Material::diffuse("grey", Vec3::splat(0.5)));
+    scene.instances.push(Instance {
+        name: "dense_panel".into(),
+        mesh: Arc::new(dense_panel(300)),
+        material: grey,
+        transform: Affine3A::IDENTITY,
+    });
+    // Only the BVH is kept current.
+    let config = BakeConfig {
+        enabled: false,
+        ..config(Method::Lightmap)
+    };
+    let (mut world, mut schedule, _) = world_with(&scene, config);
+    // One frame per edit, as when something is dragged: each frame snapshots the scene.
+    let edits = 6;
+    for k in 1..=edits {
+        place_block(&mut world, 0.01 * k as f32);
+        SurfcachePlugin::update(&mut world, &mut schedule);
+    }
+    let start = std::time::Instant::now();
+    while world.resource::<BvhBuilds>().busy() {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "the builds never finished"
+        );
+        SurfcachePlugin::update(&mut world, &mut schedule);
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let builds = world.resource::<BvhBuilds>();
+    assert_eq!(builds.requested, edits);
+    eprintln!("{} snapshots, {} built", builds.requested, builds.builds());
+    assert!(
+        builds.builds() < builds.requested,
+        "{} snapshots arrived within a build, yet {} were built",
+        builds.requested,
+        builds.builds()
+    );
+    let traced = world.resource::<TracedSceneState>();
+    assert!(traced.error.is_none());
+    assert_eq!(traced.generation, edits);
+    let mut last = scene.clone();
+    for i in &mut last.instances {
+        if i.name == "short_block" {
+            i.transform = Affine3A::from_translation(Vec3::new(0.0, 0.0, 0.01 * edits as f32));
+        }
+    }
+    // Instance order follows the entities; compare each instance's triangles by name.
+    let by_name = |s: &TracedScene| {
+        let mut triangles: Vec<(String, Vec<[Vec3; 3]>)> = (0..s.instance_names.len())
+            .map(|k| {
+                let positions = s.instance_triangles[k]
+                    .clone()
+                    .map(|t| s.positions[t as usize])
+                    .collect();
+                (s.instance_names[k].clone(), positions)
+            })
+            .collect();
+        triangles.sort_by(|a, b| a.0.cmp(&b.0));
+        triangles
+    };
+    let expected = by_name(&TracedScene::new(&last).unwrap());
+    let built = by_name(traced.scene().unwrap());
+    assert_eq!(built.len(), scene.instances.len());
+    assert!(
+        built == expected,
+        "the traced scene is not the last snapshot's"
+    );
 }
