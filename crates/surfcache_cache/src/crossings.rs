@@ -98,12 +98,6 @@ impl CrossingLine {
     }
 }
 
-/// Whether `at` lies on the sample's side of a line made by [`CrossingLine::in_uv`].
-#[inline]
-pub fn on_side(line: [f32; 3], at: Vec2) -> bool {
-    line[0] * at.x + line[1] * at.y + line[2] >= 0.0
-}
-
 /// What the in-plane probes of one sample found.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Probe {
@@ -136,7 +130,13 @@ impl SampleCrossing {
     /// Whether `at` lies on the sample's side of the line.
     #[inline]
     pub fn on_side(&self, at: Vec2) -> bool {
-        on_side(self.line, at)
+        self.distance(at) >= 0.0
+    }
+
+    /// The signed distance of `at` from the line (in the parameterisation's units).
+    #[inline]
+    pub fn distance(&self, at: Vec2) -> f32 {
+        self.line[0] * at.x + self.line[1] * at.y + self.line[2]
     }
 
     /// The value a lookup at `at` takes for the sample of value `e` whose foot has value
@@ -145,7 +145,7 @@ impl SampleCrossing {
     /// line), the sample's own value beyond it.
     #[inline]
     pub fn value(&self, at: Vec2, e: Vec3, foot: Vec3) -> Vec3 {
-        let s = self.line[0] * at.x + self.line[1] * at.y + self.line[2];
+        let s = self.distance(at);
         if self.foot >= self.site || s >= self.site {
             return e;
         }
@@ -156,8 +156,7 @@ impl SampleCrossing {
     /// Whether [`Self::value`] at `at` may differ from the sample's own value.
     #[inline]
     pub fn blends_at(&self, at: Vec2) -> bool {
-        self.foot < self.site
-            && self.line[0] * at.x + self.line[1] * at.y + self.line[2] < self.site
+        self.foot < self.site && self.distance(at) < self.site
     }
 }
 

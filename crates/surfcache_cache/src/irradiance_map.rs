@@ -1187,7 +1187,7 @@ impl SurfaceCache for IrradianceMaps {
                 };
                 grid_interpolate_kept(n, uv, near, |i, j| match lines[grid_index(i, j)] {
                     crossings::NO_LINE => true,
-                    l => crossings::on_side(self.lines[l as usize].line, uv),
+                    l => self.lines[l as usize].on_side(uv),
                 })
             }
             Err(_) => grid_interpolate(n, uv, value),

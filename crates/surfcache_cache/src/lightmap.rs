@@ -1059,11 +1059,11 @@ fn dilate(values: &mut [Vec3], state: &mut [Burial], w: usize, h: usize, passes:
 
 /// Bilinear lookup with clamp-to-edge in stored texels, arithmetic identical to
 /// [`crate::texture::bilinear`] on the unpacked image (what the GPU sampler computes),
-/// except near crossings: `crossing(k)` gives texel k's crossing and the value at its
-/// foot, if it has one; texels whose crossing separates them from the point looked up
-/// are left out and the others' weights renormalised, and a texel whose line lies
-/// between it and the point takes the value linear from its foot to it
-/// ([`crossings::SampleCrossing::value`]). Where every texel is rejected the plain
+/// except near crossings: `line_of(k)` is texel k's crossing line ([`NONE`]: none) and
+/// `crossing(line)` the line with the value at its foot; texels whose crossing separates
+/// them from the point looked up are left out and the others' weights renormalised, and
+/// a texel whose line lies between it and the point takes the value linear from its foot
+/// to it ([`crossings::SampleCrossing::value`]). Where every texel is rejected the plain
 /// bilinear value is returned.
 #[inline]
 fn bilinear_packed(
@@ -1072,7 +1072,8 @@ fn bilinear_packed(
     height: u32,
     uv: Vec2,
     scale: StoreScale,
-    crossing: impl Fn(usize) -> Option<(crossings::SampleCrossing, Vec3)>,
+    line_of: impl Fn(usize) -> u32,
+    crossing: impl Fn(u32) -> (crossings::SampleCrossing, Vec3),
 ) -> Vec3 {
     let x = (uv.x * width as f32 - 0.5).clamp(0.0, (width - 1) as f32);
     let y = (uv.y * height as f32 - 0.5).clamp(0.0, (height - 1) as f32);
@@ -1087,32 +1088,42 @@ fn bilinear_packed(
     ];
     let keys = taps.map(|(i, j, _)| (j * width + i) as usize);
     let values = keys.map(|k| scale.unpack(texels[k]));
-    let crossings = std::array::from_fn::<_, 4, _>(|n| {
-        (taps[n].2 > 0.0)
-            .then(|| crossing(keys[n]))
-            .flatten()
-            .filter(|(c, _)| !c.on_side(uv) || c.blends_at(uv))
-    });
     // Exactly the published texture's bilinear ([`crate::texture::bilinear`]).
     let plain = || {
         let top = values[0] * (1.0 - fx) + values[1] * fx;
         let bottom = values[2] * (1.0 - fx) + values[3] * fx;
         top * (1.0 - fy) + bottom * fy
     };
-    if crossings.iter().all(Option::is_none) {
+    let lines = keys.map(&line_of);
+    if lines.iter().all(|&l| l == NONE) {
         return plain();
     }
-    let (mut sum, mut weight) = (Vec3::ZERO, 0.0f32);
-    for n in (0..4).filter(|&n| taps[n].2 > 0.0) {
-        let value = match crossings[n] {
-            None => values[n],
-            Some((c, _)) if !c.on_side(uv) => continue,
-            Some((c, foot)) => c.value(uv, values[n], foot),
-        };
-        sum += value * taps[n].2;
-        weight += taps[n].2;
+    let (mut sum, mut weight, mut changed) = (Vec3::ZERO, 0.0f32, false);
+    for n in 0..4 {
+        let w = taps[n].2;
+        if w <= 0.0 {
+            continue;
+        }
+        let mut value = values[n];
+        if lines[n] != NONE {
+            let (c, foot) = crossing(lines[n]);
+            if !c.on_side(uv) {
+                changed = true;
+                continue;
+            }
+            if c.blends_at(uv) {
+                changed = true;
+                value = c.value(uv, value, foot);
+            }
+        }
+        sum += value * w;
+        weight += w;
     }
-    if weight > 0.0 { sum / weight } else { plain() }
+    if !changed || weight <= 0.0 {
+        plain()
+    } else {
+        sum / weight
+    }
 }
 
 impl SurfaceCache for Lightmaps {
@@ -1168,10 +1179,10 @@ impl SurfaceCache for Lightmaps {
                 }
             }
         }
-        // Feet of crossed texels (module docs, Crossings): estimated once, with the most
-        // samples a texel may take (they are not filtered); without a plan, to the
-        // estimator's own bound.
-        let foot_budget = self.plan.map(|p| p.max);
+        // Feet of crossed texels (module docs, Crossings): estimated once, unfiltered,
+        // with a quarter of the most samples a texel may take (about what a texel takes
+        // on average at the defaults); without a plan, to the estimator's own bound.
+        let foot_budget = self.plan.map(|p| (p.max / 4).max(p.first));
         self.feet = vec![Vec3::NAN; self.crossing_lines.len()];
         self.foot_lines.clear();
         for (slot, &c) in self.crossing_slot.iter().enumerate() {
@@ -1309,14 +1320,14 @@ impl SurfaceCache for Lightmaps {
             m.height,
             at,
             self.scale,
-            |k| match self.crossing_slot.get(base + k).copied() {
-                Some(c) if c != NONE => Some((
+            |k| self.crossing_slot.get(base + k).copied().unwrap_or(NONE),
+            |c| {
+                (
                     self.crossing_lines[c as usize],
                     self.crossing_feet
                         .get(c as usize)
                         .map_or(Vec3::ZERO, |&f| self.scale.unpack(f)),
-                )),
-                _ => None,
+                )
             },
         )
     }
