@@ -3,7 +3,9 @@
 //!
 //! - **Intersecting light-tight box.** Six single-sided quads facing inward, each
 //!   sticking out 5 cm past the box's edges so the walls pierce each other, under a
-//!   bright uniform sky: the inside is black however the walls meet.
+//!   bright uniform sky: the inside is black however the walls meet. The same box of six
+//!   closed slabs overlapping at every edge (walls as levels build them); the box of
+//!   merely touching walls is in the cache crate's physics tests.
 //! - **Contact.** Black surfaces under a uniform sky of radiance L, where E at a point of
 //!   a surface is πL less what the blockers cover (Lambert's polygon formula,
 //!   [`common::sky_minus_blockers`]): a box standing on a floor, a box piercing it, a
@@ -118,9 +120,35 @@ fn intersecting_walls_keep_a_light_tight_box_black() {
             instances.push(instance(mesh, grey(0.8)));
         }
     }
-    let scene = traced(instances, Environment::uniform(Vec3::splat(10.0)));
-    // 13 points: the centre of every wall, and 5 cm inside two edges of each of them but
-    // the last.
+    assert_black_inside_unit_box(&traced(instances, Environment::uniform(Vec3::splat(10.0))));
+}
+
+#[test]
+fn overlapping_solid_walls_keep_a_light_tight_box_black() {
+    // Box [0, 1]³ built as a level is: six closed slabs 10 cm thick (faces outward),
+    // each reaching 10 cm past the box's edges, so that they overlap at every edge and
+    // corner; each slab's face towards the inside is the box's wall.
+    let (lo, hi, t) = (-0.1f32, 1.1f32, 0.1f32);
+    let mut instances = Vec::new();
+    for axis in 0..3 {
+        for side in [0.0f32, 1.0] {
+            let (mut min, mut max) = (Vec3::splat(lo), Vec3::splat(hi));
+            min[axis] = if side == 0.0 { -t } else { 1.0 };
+            max[axis] = if side == 0.0 { 0.0 } else { 1.0 + t };
+            instances.push(instance(
+                cuboid(format!("slab{axis}{side}"), min, max, false),
+                grey(0.8),
+            ));
+        }
+    }
+    assert_black_inside_unit_box(&traced(instances, Environment::uniform(Vec3::splat(10.0))));
+}
+
+/// Bakes `scene` (whose inside is the light-tight box [0, 1]³ under a uniform sky of
+/// radiance 10) with every method that claims not to leak, and checks that E at 13
+/// points of the inside walls (the centre of every wall, and 5 cm inside two edges of
+/// each of them but the last) is black: at most 10⁻³ of the outside's πL.
+fn assert_black_inside_unit_box(scene: &TracedScene) {
     let mut points = Vec::new();
     for axis in 0..3 {
         for (side, inward) in [(0.0f32, 1.0f32), (1.0, -1.0)] {
@@ -138,9 +166,9 @@ fn intersecting_walls_keep_a_light_tight_box_black() {
     points.truncate(13);
     let outside = PI * 10.0;
     for method in METHODS {
-        let (cache, _) = bake(&scene, settings(method), estimator(0.01));
+        let (cache, _) = bake(scene, settings(method), estimator(0.01));
         for (x, n) in &points {
-            let e = lookup(cache.as_ref(), &scene, *x, *n);
+            let e = lookup(cache.as_ref(), scene, *x, *n);
             eprintln!("box {}: {x} -> {e}", method.name());
             assert!(
                 e.max_element() <= 1e-3 * outside,
