@@ -25,7 +25,7 @@ mod common;
 
 use common::{
     ASSETS, CORNELL_FAST, Points, assert_near, estimator_with, expect_success, grey, lookup,
-    stderr_of, temp_dir, tiled_floor,
+    stderr_of, temp_dir,
 };
 use serde_json::Value;
 use std::f32::consts::PI;
@@ -40,7 +40,7 @@ use surfcache::core::{
     Environment, EnvironmentMap, Instance, Light, Mesh, Scene,
     geometry::orthonormal_basis,
     glam::Vec3,
-    scenes::{cuboid, quad},
+    scenes::{cuboid, quad, tiled_floor},
 };
 use surfcache::trace::{EstimatorSettings, TracedScene};
 

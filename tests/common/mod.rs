@@ -17,7 +17,6 @@ use surfcache::cache::{
 use surfcache::core::{
     Environment, Instance, Light, Material, Mesh, Scene,
     glam::{Affine3A, Vec2, Vec3},
-    scenes::{append, quad},
 };
 use surfcache::trace::{EstimatorSettings, Sampler, TracedScene};
 
@@ -54,30 +53,6 @@ pub fn traced_with_lights(
         environment,
     })
     .expect("a valid scene")
-}
-
-/// A square floor of side `size` in the plane y = 0 from the origin towards +X and +Z,
-/// facing +Y, made of `cells` × `cells` quads (the cache crate's tests have the same
-/// helper, with the same parameters).
-pub fn tiled_floor(size: f32, cells: u32) -> Mesh {
-    let mut mesh = Mesh {
-        name: "floor".into(),
-        ..Default::default()
-    };
-    let s = size / cells as f32;
-    for i in 0..cells {
-        for j in 0..cells {
-            let (x, z) = (i as f32 * s, j as f32 * s);
-            let c = [
-                Vec3::new(x, 0.0, z),
-                Vec3::new(x + s, 0.0, z),
-                Vec3::new(x + s, 0.0, z + s),
-                Vec3::new(x, 0.0, z + s),
-            ];
-            append(&mut mesh, &quad("floor", c, Vec3::Y));
-        }
-    }
-    mesh
 }
 
 /// Adaptive `best` estimates with bound `max_rel_error` and the default sample limits

@@ -22,10 +22,11 @@
 //!   the sample lies inside a solid, e.g. a floor under a wall that pierces it). A buried
 //!   sample moves there and is estimated on the visible part of its patch.
 
+use crate::stored_rgb::StoredRgb;
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
-use surfcache_core::geometry::{interpolate, orthonormal_basis, plane_barycentric};
-use surfcache_trace::TracedScene;
+use surfcache_core::geometry::{interpolate, longest_edge, orthonormal_basis, plane_barycentric};
+use surfcache_trace::{Estimate, TracedScene};
 
 /// "No crossing line" in a cache's per-sample line indices.
 pub const NO_LINE: u32 = u32::MAX;
@@ -127,6 +128,37 @@ pub struct SampleCrossing {
 }
 
 impl SampleCrossing {
+    /// The crossing `crossing` of the sample at barycentrics `site` on one side of
+    /// `triangle`, kept as a line in the parameterisation with corners `corners`
+    /// ([`CrossingLine::in_uv`]), with the barycentrics of its foot ([`foot`]) if it has
+    /// one; `None` if the line cannot be mapped.
+    pub fn new(
+        scene: &TracedScene,
+        triangle: u32,
+        front: bool,
+        crossing: &CrossingLine,
+        corners: [Vec2; 3],
+        site: Vec2,
+    ) -> Option<(Self, Option<Vec2>)> {
+        let line = crossing.in_uv(scene, triangle, corners, site)?;
+        let mut kept = Self {
+            line,
+            site: 0.0,
+            foot: 0.0,
+        };
+        let distance =
+            |bary: Vec2| kept.distance(interpolate(corners[0], corners[1], corners[2], bary));
+        let site_distance = distance(site);
+        let foot_site = crossing
+            .in_uv(scene, triangle, BARYCENTRIC, site)
+            .and_then(|bary_line| foot(scene, triangle, front, crossing, bary_line, site))
+            .filter(|&bary| distance(bary) < site_distance);
+        let foot_distance = foot_site.map_or(site_distance, distance);
+        kept.site = site_distance;
+        kept.foot = foot_distance;
+        Some((kept, foot_site))
+    }
+
     /// Whether `at` lies on the sample's side of the line.
     #[inline]
     pub fn on_side(&self, at: Vec2) -> bool {
@@ -149,15 +181,61 @@ impl SampleCrossing {
         if self.foot >= self.site || s >= self.site {
             return e;
         }
+        self.blend(s, e, foot)
+    }
+
+    /// E at distance `s < site` from the line, linear from the foot to the sample.
+    #[inline]
+    fn blend(&self, s: f32, e: Vec3, foot: Vec3) -> Vec3 {
         let t = (s.max(0.0) - self.foot) / (self.site - self.foot);
         (foot + (e - foot) * t).max(Vec3::ZERO)
     }
 
-    /// Whether [`Self::value`] at `at` may differ from the sample's own value.
+    /// What a lookup at `at` takes from the sample of value `e` whose foot has value
+    /// `foot`: `None` where the line separates `at` from the sample, else
+    /// [`Self::value`] and whether it differs from `e` (the line lies between them).
     #[inline]
-    pub fn blends_at(&self, at: Vec2) -> bool {
-        self.foot < self.site && self.distance(at) < self.site
+    pub fn tap(&self, at: Vec2, e: Vec3, foot: Vec3) -> Option<(Vec3, bool)> {
+        let s = self.distance(at);
+        if s.is_nan() || s < 0.0 {
+            None
+        } else if self.foot >= self.site || s >= self.site {
+            Some((e, false))
+        } else {
+            Some((self.blend(s, e, foot), true))
+        }
     }
+}
+
+/// The corners of barycentric coordinates as a parameterisation ([`CrossingLine::in_uv`]).
+pub const BARYCENTRIC: [Vec2; 3] = [Vec2::ZERO, Vec2::X, Vec2::Y];
+
+/// A foot's estimate as a cache keeps it: its value, or NaN where it is buried
+/// ([`FOOT_BURIED_SHARE`]).
+pub fn foot_value(e: &Estimate) -> Vec3 {
+    if e.back_face_share > FOOT_BURIED_SHARE {
+        Vec3::NAN
+    } else {
+        e.value
+    }
+}
+
+/// After a bake: the stored values of the feet ([`foot_value`]s, NaN where none was
+/// usable, then zero), packed by `pack`; a line whose foot is unusable stops blending
+/// (its foot distance becomes its site's).
+pub fn settle_feet(
+    lines: &mut [SampleCrossing],
+    feet: &[Vec3],
+    pack: impl Fn(Vec3) -> StoredRgb,
+) -> Vec<StoredRgb> {
+    for (line, foot) in lines.iter_mut().zip(feet) {
+        if foot.is_nan() {
+            line.foot = line.site;
+        }
+    }
+    feet.iter()
+        .map(|&f| pack(if f.is_nan() { Vec3::ZERO } else { f }))
+        .collect()
 }
 
 /// A foot's estimate counts as buried (inside other geometry) past this share of rays on
@@ -173,7 +251,7 @@ pub const FOOT_KEY: u64 = 0x0f00_7000_0000_0000;
 /// as on it: four spawn offsets, at least 10⁻⁴ of the longest edge.
 pub fn boundary_tolerance(scene: &TracedScene, triangle: u32) -> f32 {
     let [a, b, c] = scene.positions[triangle as usize];
-    let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+    let longest = longest_edge(a, b, c);
     (4.0 * scene.spawn_offset()).max(1e-4 * longest)
 }
 
@@ -181,7 +259,7 @@ pub fn boundary_tolerance(scene: &TracedScene, triangle: u32) -> f32 {
 /// crossing `crossing` (the same line in barycentrics: `line`, [`CrossingLine::in_uv`]):
 /// the point of the triangle nearest to the line on the sample's side, two boundary
 /// tolerances short of it, where E next to the contact is estimated. Returns its
-/// barycentrics and its signed distance from `line`, or `None` if it does not lie on the
+/// barycentrics, or `None` if it does not lie on the
 /// triangle, the sample is no farther from the line than the foot would be, or the
 /// crossing surface does not reach the foot (the line runs on past the end of a wall or
 /// a box's corner: an in-plane ray from the foot towards the line meets nothing).
@@ -192,7 +270,7 @@ pub fn foot(
     crossing: &CrossingLine,
     line: [f32; 3],
     site: Vec2,
-) -> Option<(Vec2, f32)> {
+) -> Option<Vec2> {
     let [a, b, c] = scene.positions[triangle as usize];
     let normal = Vec2::new(line[0], line[1]);
     let metres = (normal.x * (b - a) + normal.y * (c - a)).length();
@@ -212,7 +290,18 @@ pub fn foot(
     let origin = scene.spawn_origin(&scene.surface_point(triangle, foot, front));
     scene
         .occluded(origin, -crossing.normal, 4.0 * tolerance)
-        .then_some((foot, gap))
+        .then_some(foot)
+}
+
+impl Probe {
+    /// Where the sample at `uv` that this probe describes is estimated: just beyond the
+    /// crossing surface it lies on ([`Probe::touching`]), else at `uv`.
+    pub fn site(&self, uv: Vec2) -> Vec2 {
+        match self.exit {
+            Some(exit) if self.touching => exit,
+            _ => uv,
+        }
+    }
 }
 
 /// Probes the surface around barycentrics `uv` of `triangle` on the given side within
@@ -295,7 +384,7 @@ pub fn probe(scene: &TracedScene, triangle: u32, uv: Vec2, front: bool, reach: f
 /// probes from every grid point as far as one grid spacing (the longest edge over `n`).
 pub fn grid_crossed(scene: &TracedScene, triangle: u32, front: bool, n: u32) -> bool {
     let [a, b, c] = scene.positions[triangle as usize];
-    let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+    let longest = longest_edge(a, b, c);
     let reach = longest / n.max(1) as f32;
     let inv = 1.0 / n.max(1) as f32;
     for d in 0..=n {

@@ -609,22 +609,10 @@ impl Lightmaps {
         self.packed = values.iter().map(|&v| self.scale.pack(v)).collect();
         // Feet share the texels' scale (clamped to their largest value, so that the
         // texels are stored as without them).
-        for (line, foot) in self.crossing_lines.iter_mut().zip(&self.feet) {
-            if foot.is_nan() {
-                line.foot = line.site;
-            }
-        }
-        self.crossing_feet = self
-            .feet
-            .iter()
-            .map(|&f| {
-                self.scale.pack(if f.is_nan() {
-                    Vec3::ZERO
-                } else {
-                    f.min(Vec3::splat(max))
-                })
-            })
-            .collect();
+        let scale = self.scale;
+        self.crossing_feet = crossings::settle_feet(&mut self.crossing_lines, &self.feet, |f| {
+            scale.pack(f.min(Vec3::splat(max)))
+        });
         stats.sample_points += self.foot_sites.iter().flatten().count() as u64;
         stats.samples += self.foot_samples;
         // UV1: three f32 pairs per triangle corner (a generated layout needs a vertex per
@@ -674,16 +662,11 @@ impl Lightmaps {
                         // A centre on a crossing surface is estimated just beyond it, on
                         // the open side, from the first round on; its crossing line is
                         // oriented from there.
-                        match probe.exit {
-                            Some(exit) if probe.touching => (
-                                exit,
-                                Probe {
-                                    exit: None,
-                                    ..probe
-                                },
-                            ),
-                            _ => (uv, probe),
+                        let site = probe.site(uv);
+                        if probe.touching {
+                            probe.exit = None;
                         }
+                        (site, probe)
                     }
                 }
             })
@@ -696,28 +679,15 @@ impl Lightmaps {
         for (slot, (uv, probe)) in probes.iter().enumerate() {
             let Some(line) = probe.crossing else { continue };
             let t = self.owner[slot % self.layer_texels];
+            let front = slot < self.layer_texels;
             let corners = self.uv1[t as usize];
-            let Some(l) = line.in_uv(scene, t, corners, *uv) else {
+            let Some((kept, foot)) =
+                crossings::SampleCrossing::new(scene, t, front, &line, corners, *uv)
+            else {
                 continue;
             };
-            let distance = |bary: Vec2| {
-                let at = interpolate(corners[0], corners[1], corners[2], bary);
-                l[0] * at.x + l[1] * at.y + l[2]
-            };
-            let site = distance(*uv);
-            // The foot is found in barycentrics, where the texel's sample lives.
-            let front = slot < self.layer_texels;
-            let foot = line
-                .in_uv(scene, t, [Vec2::ZERO, Vec2::X, Vec2::Y], *uv)
-                .and_then(|b| crossings::foot(scene, t, front, &line, b, *uv))
-                .map(|(bary, _)| bary)
-                .filter(|&bary| distance(bary) < site);
             self.crossing_slot[slot] = self.crossing_lines.len() as u32;
-            self.crossing_lines.push(crossings::SampleCrossing {
-                line: l,
-                site,
-                foot: foot.map_or(site, distance),
-            });
+            self.crossing_lines.push(kept);
             self.foot_sites.push(foot);
         }
     }
@@ -1107,14 +1077,12 @@ fn bilinear_packed(
         let mut value = values[n];
         if lines[n] != NONE {
             let (c, foot) = crossing(lines[n]);
-            if !c.on_side(uv) {
+            let Some((tapped, blended)) = c.tap(uv, value, foot) else {
                 changed = true;
                 continue;
-            }
-            if c.blends_at(uv) {
-                changed = true;
-                value = c.value(uv, value, foot);
-            }
+            };
+            changed |= blended;
+            value = tapped;
         }
         sum += value * w;
         weight += w;
@@ -1226,11 +1194,7 @@ impl SurfaceCache for Lightmaps {
         let foot_estimates = &estimates[self.slots.len().min(estimates.len())..];
         for (&line, e) in self.foot_lines.iter().zip(foot_estimates) {
             self.foot_samples += e.samples as u64;
-            self.feet[line as usize] = if e.back_face_share > crossings::FOOT_BURIED_SHARE {
-                Vec3::NAN
-            } else {
-                e.value
-            };
+            self.feet[line as usize] = crossings::foot_value(e);
         }
         self.foot_lines.clear();
         if self.merged.len() != total {

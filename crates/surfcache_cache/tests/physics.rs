@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{PI, Points, estimator, locate, tiled_floor};
+use common::{PI, Points, estimator, locate};
 use surfcache_cache::{
     SurfaceCache,
     bake::{Baker, FLOOR_FRACTION, bake_to_convergence, mean_irradiance},
@@ -18,7 +18,7 @@ use surfcache_cache::{
 use surfcache_core::{
     Environment, Instance, Light, Material, Mesh, Scene,
     glam::{Vec2, Vec3},
-    scenes::{cornell, cuboid, quad},
+    scenes::{cornell, cuboid, quad, tiled_floor},
 };
 use surfcache_trace::{Sampler, TracedScene};
 

@@ -15,6 +15,12 @@ pub fn triangle_cross(a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
     (b - a).cross(c - a)
 }
 
+/// The longest edge of triangle abc: max(|B−A|, |C−B|, |A−C|).
+#[inline]
+pub fn longest_edge(a: Vec3, b: Vec3, c: Vec3) -> f32 {
+    (b - a).length().max((c - b).length()).max((a - c).length())
+}
+
 /// Area ½|(B−A)×(C−A)|.
 #[inline]
 pub fn triangle_area(a: Vec3, b: Vec3, c: Vec3) -> f32 {

@@ -46,6 +46,30 @@ pub fn square(name: impl Into<String>, half: f32, y: f32, facing: Vec3) -> Mesh 
     )
 }
 
+/// A square floor of side `size` in the plane y = 0 from the origin towards +X and +Z,
+/// facing +Y, made of `cells` × `cells` quads (a finely tessellated surface, as levels
+/// have).
+pub fn tiled_floor(size: f32, cells: u32) -> Mesh {
+    let mut mesh = Mesh {
+        name: "floor".into(),
+        ..Default::default()
+    };
+    let s = size / cells as f32;
+    for i in 0..cells {
+        for j in 0..cells {
+            let (x, z) = (i as f32 * s, j as f32 * s);
+            let c = [
+                Vec3::new(x, 0.0, z),
+                Vec3::new(x + s, 0.0, z),
+                Vec3::new(x + s, 0.0, z + s),
+                Vec3::new(x, 0.0, z + s),
+            ];
+            append(&mut mesh, &quad("floor", c, Vec3::Y));
+        }
+    }
+    mesh
+}
+
 /// Appends `other`'s triangles to `mesh` (vertices are not shared between the two).
 pub fn append(mesh: &mut Mesh, other: &Mesh) {
     let base = mesh.positions.len() as u32;

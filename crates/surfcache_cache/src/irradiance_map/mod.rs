@@ -151,10 +151,11 @@ use crate::{
     UNMAPPED, crossings, mesh_colour,
     stored_rgb::{STORED_RGB_BYTES, StoreScale, StoredRgb},
 };
+use crossings::SampleCrossing;
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use surfcache_core::sampling::splitmix64;
+use surfcache_core::{geometry::longest_edge, sampling::splitmix64};
 use surfcache_trace::{Estimate, TracedScene};
 
 /// What only baking needs: raw estimates, their errors, burial flags, refinement state.
@@ -210,6 +211,15 @@ struct Working {
 }
 
 impl Working {
+    /// The order grid slot `g` has (`coarse`, 0 before its first round) and the order
+    /// this round gives it: its first order, or double.
+    fn round_orders(&self, g: usize, levels: &[u8]) -> (u32, u32) {
+        match order_of_level(levels[g]) {
+            0 => (0, 1 << self.start_log2(g)),
+            coarse => (coarse, 2 * coarse),
+        }
+    }
+
     /// log2 of the order grid slot `g` starts at: a re-bake's prior order, else
     /// `min(2, n_max)`.
     fn start_log2(&self, g: usize) -> u8 {
@@ -229,48 +239,29 @@ fn probe_new_samples(
     scene: &TracedScene,
     w: &Working,
     levels: &[u8],
-) -> Vec<(Vec2, Option<crossings::SampleCrossing>, Option<Vec2>)> {
+) -> Vec<(Vec2, Option<SampleCrossing>, Option<Vec2>)> {
     use rayon::prelude::*;
     let mut sites = Vec::new();
     for &g in w.pending.iter().filter(|&&g| w.crossed[g as usize]) {
-        let coarse = order_of_level(levels[g as usize]);
-        let n = if coarse == 0 {
-            1 << w.start_log2(g as usize)
-        } else {
-            2 * coarse
-        };
+        let (coarse, n) = w.round_orders(g as usize, levels);
         let inv = 1.0 / n as f32;
         for_each_new_sample(coarse, n, |i, j, _| {
             sites.push((g, Vec2::new(i as f32 * inv, j as f32 * inv)));
         });
     }
-    let corners = [Vec2::ZERO, Vec2::X, Vec2::Y];
     sites
         .par_iter()
         .map(|&(g, uv)| {
             let (t, front) = (g / 2, g % 2 == 0);
             let [a, b, c] = scene.positions[t as usize];
-            let longest = (b - a).length().max((c - b).length()).max((a - c).length());
-            let reach = crossings::LINE_REACH * longest / w.max_orders[t as usize] as f32;
+            let reach =
+                crossings::LINE_REACH * longest_edge(a, b, c) / w.max_orders[t as usize] as f32;
             let probe = crossings::probe(scene, t, uv, front, reach);
-            let site = match probe.exit {
-                Some(exit) if probe.touching => exit,
-                _ => uv,
-            };
-            let Some((crossing, line)) = probe
-                .crossing
-                .and_then(|c| Some((c, c.in_uv(scene, t, corners, site)?)))
-            else {
-                return (site, None, None);
-            };
-            let side = line[0] * site.x + line[1] * site.y + line[2];
-            let foot = crossings::foot(scene, t, front, &crossing, line, site);
-            let crossing = crossings::SampleCrossing {
-                line,
-                site: side,
-                foot: foot.map_or(side, |(_, gap)| gap),
-            };
-            (site, Some(crossing), foot.map(|(uv, _)| uv))
+            let site = probe.site(uv);
+            let kept = probe.crossing.and_then(|crossing| {
+                SampleCrossing::new(scene, t, front, &crossing, crossings::BARYCENTRIC, site)
+            });
+            (site, kept.map(|(c, _)| c), kept.and_then(|(_, foot)| foot))
         })
         .collect()
 }
@@ -294,7 +285,7 @@ pub struct IrradianceMaps {
     buried: u64,
     /// The crossing line of each sample that has one (module docs, Crossings).
     #[serde(default)]
-    lines: Vec<crossings::SampleCrossing>,
+    lines: Vec<SampleCrossing>,
     /// E at each line's foot ([`crossings::SampleCrossing::foot`]; zero where it has none).
     #[serde(default)]
     feet: Vec<StoredRgb>,
@@ -317,13 +308,7 @@ impl IrradianceMaps {
         let max_orders: Vec<u32> = scene
             .positions
             .iter()
-            .map(|[a, b, c]| {
-                let longest = (*b - *a)
-                    .length()
-                    .max((*c - *b).length())
-                    .max((*a - *c).length());
-                settings.max_order_for(longest)
-            })
+            .map(|[a, b, c]| settings.max_order_for(longest_edge(*a, *b, *c)))
             .collect();
         let refine: Vec<bool> = (0..2 * triangles)
             .map(|g| {
@@ -519,12 +504,7 @@ impl SurfaceCache for IrradianceMaps {
         let mut corner_points = Vec::new();
         for &g in &w.pending {
             let (t, front) = (g / 2, g % 2 == 0);
-            let coarse = order_of_level(self.levels[g as usize]);
-            let n = if coarse == 0 {
-                1 << w.start_log2(g as usize)
-            } else {
-                2 * coarse
-            };
+            let (coarse, n) = w.round_orders(g as usize, &self.levels);
             if coarse == 0 && !w.links.is_empty() && corner_points.is_empty() {
                 corner_points = vec![u32::MAX; w.links.len()];
             }
@@ -683,11 +663,7 @@ impl SurfaceCache for IrradianceMaps {
         }
         for &(line, point) in &w.round_feet {
             let e = &estimates[point as usize];
-            w.feet[line as usize] = if e.back_face_share > crossings::FOOT_BURIED_SHARE {
-                Vec3::NAN
-            } else {
-                e.value
-            };
+            w.feet[line as usize] = crossings::foot_value(e);
         }
         estimates.iter().for_each(|e| self.totals.add(e));
         self.levels = new_levels;
@@ -745,17 +721,8 @@ impl SurfaceCache for IrradianceMaps {
         self.packed
             .extend(w.filled.iter().map(|&v| self.scale.pack(v)));
         self.sample_counts.clone_from(&w.samples);
-        for (line, foot) in self.lines.iter_mut().zip(&w.feet) {
-            if foot.is_nan() {
-                line.foot = line.site;
-            }
-        }
-        self.feet.clear();
-        self.feet.extend(
-            w.feet
-                .iter()
-                .map(|&f| self.scale.pack(if f.is_nan() { Vec3::ZERO } else { f })),
-        );
+        let scale = self.scale;
+        self.feet = crossings::settle_feet(&mut self.lines, &w.feet, |f| scale.pack(f));
         self.crossed_grids.clear();
         self.sample_lines.clear();
         for g in (0..slots).filter(|&g| w.crossed[g] && self.levels[g] > 0) {

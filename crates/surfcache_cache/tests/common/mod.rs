@@ -5,11 +5,7 @@
 #![allow(dead_code)]
 
 use surfcache_cache::{SamplePoint, SurfaceCache, bake::sample_frame};
-use surfcache_core::{
-    Mesh,
-    glam::{Vec2, Vec3},
-    scenes::{append, quad},
-};
+use surfcache_core::glam::{Vec2, Vec3};
 use surfcache_trace::{Estimate, EstimatorSettings, Sampler, SurfacePoint, TracedScene};
 
 pub const PI: f32 = std::f32::consts::PI;
@@ -97,28 +93,4 @@ pub fn locate(scene: &TracedScene, x: Vec3, n: Vec3) -> (u32, Vec2, bool) {
         .dot(scene.geometric_normals[p.triangle as usize])
         > 0.0;
     (p.triangle, p.uv, front)
-}
-
-/// A square floor of side `size` in the plane y = 0 from the origin towards +X and +Z,
-/// facing +Y, made of `cells` × `cells` quads (the root tests have the same helper, with
-/// the same parameters).
-pub fn tiled_floor(size: f32, cells: u32) -> Mesh {
-    let mut mesh = Mesh {
-        name: "floor".into(),
-        ..Default::default()
-    };
-    let s = size / cells as f32;
-    for i in 0..cells {
-        for j in 0..cells {
-            let (x, z) = (i as f32 * s, j as f32 * s);
-            let c = [
-                Vec3::new(x, 0.0, z),
-                Vec3::new(x + s, 0.0, z),
-                Vec3::new(x + s, 0.0, z + s),
-                Vec3::new(x, 0.0, z + s),
-            ];
-            append(&mut mesh, &quad("floor", c, Vec3::Y));
-        }
-    }
-    mesh
 }
