@@ -1,0 +1,219 @@
+//! Lightmaps: every baked entity's irradiance texture as a Bevy [`Image`] and a Bevy
+//! [`Lightmap`] component, in Bevy's units, updated in place after every re-bake.
+//!
+//! **Units.** Bevy's PBR shader adds `texel × StandardMaterial::lightmap_exposure ×
+//! diffuse colour` to a surface's indirect light, a radiance in the units of its emissive
+//! colours and lights, before the camera's exposure. A Lambertian surface of albedo ρ under
+//! irradiance E leaves L = ρ/π · E, so a texel holds [`LIGHTMAP_SCALE`]` × E` = E/π and
+//! `lightmap_exposure` stays 1. Texels are `Rgba16Float` (surfcache stores E as half
+//! floats too, docs/design.md, Storage), sampled bilinearly and clamped to the edge, as
+//! surfcache's own lookups are.
+//!
+//! **Meshes.** Bevy reads a lightmap through the mesh's `ATTRIBUTE_UV_1`. A mesh whose own
+//! UV1 the bake used is drawn as it is; otherwise the entity's `Mesh3d` is switched to a
+//! copy carrying the generated layout ([`crate::mesh::with_lightmap_uv1`]), and back to
+//! the original when the entity leaves the bake. [`LightmappedMesh`] remembers both.
+
+use crate::mesh::{has_uv1, with_lightmap_uv1};
+use bevy::{
+    asset::{Assets, Handle, RenderAssetUsages},
+    image::{Image, ImageSampler},
+    log::warn,
+    math::Rect,
+    mesh::{Mesh, Mesh3d},
+    pbr::Lightmap,
+    prelude::*,
+    render::render_resource::{Extent3d, TextureDimension, TextureFormat},
+};
+use half::f16;
+use surfcache_cache::IrradianceTexture;
+use surfcache_ecs::PublishedLightmaps;
+
+/// Bevy lightmap texel per unit of irradiance E (W/m²): 1/π (module docs).
+pub const LIGHTMAP_SCALE: f32 = core::f32::consts::FRAC_1_PI;
+
+/// The texture's texels × [`LIGHTMAP_SCALE`] as an `Rgba16Float` image (alpha 1), sampled
+/// bilinearly and clamped to the edge. Values beyond half-float range saturate.
+pub fn lightmap_image(texture: &IrradianceTexture) -> Image {
+    let data: Vec<u8> = texture
+        .texels
+        .iter()
+        .flat_map(|e| (*e * LIGHTMAP_SCALE).extend(1.0).to_array())
+        .flat_map(|x| f16::from_f32(x.min(f16::MAX.to_f32())).to_le_bytes())
+        .collect();
+    let mut image = Image::new(
+        Extent3d {
+            width: texture.width,
+            height: texture.height,
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        data,
+        TextureFormat::Rgba16Float,
+        RenderAssetUsages::default(),
+    );
+    image.sampler = ImageSampler::linear();
+    image
+}
+
+/// On a mesh entity that shows a baked lightmap: its mesh before the plugin gave it UV1,
+/// the UV1 copy it draws instead (if it needs one) and its lightmap image.
+#[derive(Component, Clone, Debug)]
+pub struct LightmappedMesh {
+    /// The game's own mesh (the one baked).
+    pub source: Handle<Mesh>,
+    /// The copy with the generated UV1 layout, when the source has no usable UV1.
+    pub uv1_mesh: Option<Handle<Mesh>>,
+    /// The lightmap image (also in the entity's [`Lightmap`]).
+    pub image: Handle<Image>,
+    /// [`surfcache_ecs::EntityLightmap::version`] of the texture shown.
+    pub version: u64,
+}
+
+impl LightmappedMesh {
+    /// The game's mesh of an entity that draws `drawn`: the source when `drawn` is the
+    /// plugin's UV1 copy.
+    pub fn source_of(this: Option<&Self>, drawn: &Handle<Mesh>) -> Handle<Mesh> {
+        match this {
+            Some(l) if l.uv1_mesh.as_ref() == Some(drawn) => l.source.clone(),
+            _ => drawn.clone(),
+        }
+    }
+}
+
+/// Publishing into Bevy: after each published bake, writes the changed entities' texels
+/// into their lightmap images (in place), gives new ones an image, a [`Lightmap`] and the
+/// UV1 their layout needs, and takes them away from entities that left the bake.
+pub fn apply_lightmaps(
+    mut commands: Commands,
+    published: Res<PublishedLightmaps>,
+    mut images: ResMut<Assets<Image>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut entities: Query<(Entity, &mut Mesh3d, Option<&mut LightmappedMesh>)>,
+) {
+    if !published.is_changed() {
+        return;
+    }
+    for (entity, mut drawn, mut state) in &mut entities {
+        let Some(texture) = published
+            .by_entity
+            .get(&entity)
+            .and_then(|l| l.front.as_ref().map(|t| (t, l.version)))
+        else {
+            if let Some(state) = state {
+                if state.uv1_mesh.as_ref() == Some(&drawn.0) {
+                    drawn.0 = state.source.clone();
+                }
+                commands
+                    .entity(entity)
+                    .remove::<(Lightmap, LightmappedMesh)>();
+            }
+            continue;
+        };
+        let (texture, version) = texture;
+        if state.as_ref().is_some_and(|s| s.version == version) {
+            continue;
+        }
+        let source = LightmappedMesh::source_of(state.as_deref(), &drawn.0);
+        let Some(source_mesh) = meshes.get(&source) else {
+            continue;
+        };
+        // The mesh to draw: the source if its UV1 is the layout, else a UV1 copy (kept
+        // when it already carries this layout).
+        let mut uv1_mesh = state.as_ref().and_then(|s| s.uv1_mesh.clone());
+        if has_uv1(source_mesh, &texture.uv1) {
+            uv1_mesh = None;
+        } else if !uv1_mesh
+            .as_ref()
+            .and_then(|h| meshes.get(h))
+            .is_some_and(|m| has_uv1(m, &texture.uv1))
+        {
+            let copy = match with_lightmap_uv1(source_mesh, &texture.uv1) {
+                Ok(copy) => copy,
+                Err(e) => {
+                    warn!("surfcache: no lightmap for {entity}: {e}");
+                    continue;
+                }
+            };
+            match &uv1_mesh {
+                Some(h) if meshes.contains(h) => {
+                    if let Some(mut m) = meshes.get_mut(h) {
+                        *m = copy;
+                    }
+                }
+                _ => uv1_mesh = Some(meshes.add(copy)),
+            }
+        }
+        let target = uv1_mesh.clone().unwrap_or_else(|| source.clone());
+        if drawn.0 != target {
+            drawn.0 = target;
+        }
+        let pixels = lightmap_image(texture);
+        match &mut state {
+            Some(state) => {
+                match images.get_mut(&state.image) {
+                    Some(mut image) => *image = pixels,
+                    None => state.image = images.add(pixels),
+                }
+                state.source = source;
+                state.uv1_mesh = uv1_mesh;
+                state.version = version;
+                commands.entity(entity).insert(bevy_lightmap(&state.image));
+            }
+            None => {
+                let image = images.add(pixels);
+                commands.entity(entity).insert((
+                    bevy_lightmap(&image),
+                    LightmappedMesh {
+                        source,
+                        uv1_mesh,
+                        image,
+                        version,
+                    },
+                ));
+            }
+        }
+    }
+}
+
+/// The [`Lightmap`] of a whole image (surfcache's textures are one per entity).
+fn bevy_lightmap(image: &Handle<Image>) -> Lightmap {
+    Lightmap {
+        image: image.clone(),
+        uv_rect: Rect::new(0.0, 0.0, 1.0, 1.0),
+        bicubic_sampling: false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    #[test]
+    fn a_texel_holds_irradiance_over_pi_in_half_floats() {
+        let e = [Vec3::new(314.159, 100.0, 0.0), Vec3::new(1.0, 2.0, 3.0)];
+        let texture = IrradianceTexture {
+            width: 2,
+            height: 1,
+            texels: e.to_vec(),
+            ..Default::default()
+        };
+        let image = lightmap_image(&texture);
+        assert_eq!(image.texture_descriptor.format, TextureFormat::Rgba16Float);
+        let data = image.data.unwrap();
+        let texel = |k: usize, c: usize| {
+            let at = 8 * k + 2 * c;
+            f16::from_le_bytes([data[at], data[at + 1]]).to_f32()
+        };
+        for (k, e) in e.iter().enumerate() {
+            for c in 0..3 {
+                let want = e[c] / core::f32::consts::PI;
+                // Half floats keep 11 significant bits.
+                assert!((texel(k, c) - want).abs() <= want * 1e-3, "{k} {c}");
+            }
+            assert_eq!(texel(k, 3), 1.0);
+        }
+        assert!((texel(0, 0) - 100.0).abs() < 0.05);
+    }
+}
