@@ -12,7 +12,7 @@ mkdir -p "$out"
 
 # The screenshot test writes bevy_cornell*.png where it is told and prints its figure.
 SURFCACHE_SCREENSHOT_DIR="$out" SURFCACHE_REQUIRE_DISPLAY=1 \
-    cargo test -p surfcache_bevy --test screenshot
+    cargo test --workspace --test screenshot
 
 if [ -f "$assets/scenes/sponza_crytek/Sponza.gltf" ]; then
     cargo build --release -p surfcache_bevy --example bevy_viewer

@@ -74,7 +74,9 @@ fn parse_args() -> Result<Args, String> {
                 args.size = v
                     .split_once('x')
                     .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
-                    .filter(|&(w, h): &(u32, u32)| (64..=8192).contains(&w) && (64..=8192).contains(&h))
+                    .filter(|&(w, h): &(u32, u32)| {
+                        (64..=8192).contains(&w) && (64..=8192).contains(&h)
+                    })
                     .ok_or(format!("--size takes WxH, not '{v}'"))?;
             }
             "--quick" => args.quick = true,
@@ -228,10 +230,7 @@ fn main() -> std::process::ExitCode {
         last: None,
     })
     .add_systems(Startup, setup)
-    .add_systems(
-        Update,
-        (scale_emission, move_object, show_progress),
-    );
+    .add_systems(Update, (scale_emission, move_object, show_progress));
     if args.screenshot.is_some() {
         app.insert_resource(capture)
             .add_systems(Update, capture_when_baked);
@@ -290,7 +289,11 @@ fn setup(
             );
         }
         Some(file) => {
-            let name = file.file_name().unwrap_or_default().to_string_lossy().into_owned();
+            let name = file
+                .file_name()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .into_owned();
             commands.spawn(WorldAssetRoot(
                 assets.load(GltfAssetLabel::Scene(0).from_asset(name)),
             ));
@@ -389,7 +392,11 @@ fn show_progress(
             .unwrap_or_default();
         format!(
             "{} bake: {:.1} % done, {:.2} Mrays/s{eta}",
-            if status.incremental { "incremental" } else { "full" },
+            if status.incremental {
+                "incremental"
+            } else {
+                "full"
+            },
             100.0 * status.fraction,
             status.rays_per_second / 1e6,
         )
@@ -422,7 +429,13 @@ fn write_screenshot(path: &Path, shot: &Image) -> Result<(), String> {
     );
     let rgb: Vec<u8> = data
         .chunks_exact(4)
-        .flat_map(|p| if bgra { [p[2], p[1], p[0]] } else { [p[0], p[1], p[2]] })
+        .flat_map(|p| {
+            if bgra {
+                [p[2], p[1], p[0]]
+            } else {
+                [p[0], p[1], p[2]]
+            }
+        })
         .collect();
     let mut file = Vec::new();
     {

@@ -52,7 +52,10 @@ impl BakeEnvironment {
                 texels.push(texture.texel(i, j).truncate());
             }
         }
-        if let Some(bad) = texels.iter().find(|t| !t.is_finite() || t.min_element() < 0.0) {
+        if let Some(bad) = texels
+            .iter()
+            .find(|t| !t.is_finite() || t.min_element() < 0.0)
+        {
             return Err(MaterialError::Unreadable(format!(
                 "the environment image has a texel {bad} that is not a finite radiance"
             )));

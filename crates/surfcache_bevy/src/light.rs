@@ -87,12 +87,21 @@ pub enum BevyLight {
 pub fn bevy_light(light: &Light) -> (BevyLight, Transform) {
     let color = |c: Vec3| {
         let scale = c.max_element().max(f32::MIN_POSITIVE);
-        (Color::linear_rgb(c.x / scale, c.y / scale, c.z / scale), scale)
+        (
+            Color::linear_rgb(c.x / scale, c.y / scale, c.z / scale),
+            scale,
+        )
     };
     let aim = |position: Vec3, direction: Vec3| {
-        let up = if direction.y.abs() > 0.9 { Vec3::X } else { Vec3::Y };
-        Transform::from_translation(glam_bridge::bevy_vec3(position))
-            .looking_to(glam_bridge::bevy_vec3(direction), glam_bridge::bevy_vec3(up))
+        let up = if direction.y.abs() > 0.9 {
+            Vec3::X
+        } else {
+            Vec3::Y
+        };
+        Transform::from_translation(glam_bridge::bevy_vec3(position)).looking_to(
+            glam_bridge::bevy_vec3(direction),
+            glam_bridge::bevy_vec3(up),
+        )
     };
     match *light {
         Light::Directional {

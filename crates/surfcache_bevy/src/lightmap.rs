@@ -151,9 +151,10 @@ pub fn apply_lightmaps(
         let pixels = lightmap_image(texture);
         match &mut state {
             Some(state) => {
-                match images.get_mut(&state.image) {
-                    Some(mut image) => *image = pixels,
-                    None => state.image = images.add(pixels),
+                if let Some(mut image) = images.get_mut(&state.image) {
+                    *image = pixels;
+                } else {
+                    state.image = images.add(pixels);
                 }
                 state.source = source;
                 state.uv1_mesh = uv1_mesh;

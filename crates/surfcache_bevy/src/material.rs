@@ -82,7 +82,10 @@ pub fn texture_from_image(
         TextureFormat::Rgba8UnormSrgb if data.len() >= 4 * texels => Texture::from_srgb8(
             width,
             height,
-            data.chunks_exact(4).take(texels).map(|c| [c[0], c[1], c[2], c[3]]).collect(),
+            data.chunks_exact(4)
+                .take(texels)
+                .map(|c| [c[0], c[1], c[2], c[3]])
+                .collect(),
         ),
         TextureFormat::Rgba8Unorm if data.len() >= 4 * texels => Texture::from_linear(
             width,
@@ -153,10 +156,15 @@ mod tests {
 
     #[test]
     fn diffuse_colour_emission_and_sides_round_trip() {
-        let mut m = Material::emissive("lamp", Vec3::new(0.5, 0.25, 0.125), Vec3::new(17.0, 12.0, 4.0));
+        let mut m = Material::emissive(
+            "lamp",
+            Vec3::new(0.5, 0.25, 0.125),
+            Vec3::new(17.0, 12.0, 4.0),
+        );
         m.double_sided = true;
         m.alpha_mode = AlphaMode::Mask(0.5);
-        let back = material_from_standard(&standard_material(&m), "lamp", |_| unreachable!()).unwrap();
+        let back =
+            material_from_standard(&standard_material(&m), "lamp", |_| unreachable!()).unwrap();
         assert_eq!(back, m);
     }
 

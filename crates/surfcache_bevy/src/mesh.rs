@@ -55,10 +55,12 @@ pub fn mesh_from_bevy(mesh: &Mesh, name: &str) -> Result<CoreMesh, String> {
         normals: Vec::new(),
         uv0: uvs(attribute(Mesh::ATTRIBUTE_UV_0.id)?),
         uv1: uvs(attribute(Mesh::ATTRIBUTE_UV_1.id)?),
-        indices: corners.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        indices: corners
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect(),
     };
-    match attribute(Mesh::ATTRIBUTE_NORMAL.id)?.and_then(VertexAttributeValues::as_float3)
-    {
+    match attribute(Mesh::ATTRIBUTE_NORMAL.id)?.and_then(VertexAttributeValues::as_float3) {
         Some(normals) => core.normals = normals.iter().map(|n| Vec3::from_array(*n)).collect(),
         None => core.compute_normals(),
     }
@@ -103,7 +105,8 @@ pub fn has_uv1(mesh: &Mesh, uv1: &[[Vec2; 3]]) -> bool {
 
 /// A copy of `mesh` with one vertex per triangle corner and `uv1[t]` as the
 /// `ATTRIBUTE_UV_1` of triangle `t`'s corners: what a generated lightmap layout needs,
-/// since neighbouring triangles on different charts no longer share UV1.
+/// since neighbouring triangles on different charts no longer share UV1. A mesh without
+/// UV0 gets one of zeros (Bevy 0.19's shader needs UV0 once a mesh has UV1).
 pub fn with_lightmap_uv1(mesh: &Mesh, uv1: &[[Vec2; 3]]) -> Result<Mesh, String> {
     let mut copy = mesh.clone();
     if copy.indices().is_some() {
@@ -122,6 +125,11 @@ pub fn with_lightmap_uv1(mesh: &Mesh, uv1: &[[Vec2; 3]]) -> Result<Mesh, String>
         .flatten()
         .map(|uv| BevyVec2::from_array(uv.to_array()).to_array())
         .collect();
+    // Bevy 0.19's PBR shader reads UV0 wherever a mesh has any UV set, and fails to
+    // compile for a mesh with UV1 alone: such meshes get a UV0 of zeros.
+    if !matches!(copy.try_attribute_option(Mesh::ATTRIBUTE_UV_0), Ok(Some(_))) {
+        copy.insert_attribute(Mesh::ATTRIBUTE_UV_0, vec![[0.0f32; 2]; corners]);
+    }
     copy.insert_attribute(Mesh::ATTRIBUTE_UV_1, values);
     Ok(copy)
 }
@@ -147,7 +155,9 @@ pub fn bevy_mesh(mesh: &CoreMesh) -> Mesh {
     if !mesh.uv1.is_empty() {
         out.insert_attribute(Mesh::ATTRIBUTE_UV_1, v2(&mesh.uv1));
     }
-    out.insert_indices(Indices::U32(mesh.indices.iter().flatten().copied().collect()));
+    out.insert_indices(Indices::U32(
+        mesh.indices.iter().flatten().copied().collect(),
+    ));
     out
 }
 
@@ -172,7 +182,11 @@ mod tests {
         let uv1: Vec<[Vec2; 3]> = (0..core.indices.len())
             .map(|t| {
                 let x = t as f32 / 16.0;
-                [Vec2::new(x, 0.0), Vec2::new(x, 0.5), Vec2::new(x + 0.05, 0.5)]
+                [
+                    Vec2::new(x, 0.0),
+                    Vec2::new(x, 0.5),
+                    Vec2::new(x + 0.05, 0.5),
+                ]
             })
             .collect();
         assert!(!has_uv1(&mesh, &uv1));
@@ -195,6 +209,9 @@ mod tests {
         )
         .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, vec![[0.0f32; 3]; 2]);
         let e = mesh_from_bevy(&lines, "wire").unwrap_err();
-        assert!(e.contains("wire") && e.contains("not a triangle list"), "{e}");
+        assert!(
+            e.contains("wire") && e.contains("not a triangle list"),
+            "{e}"
+        );
     }
 }

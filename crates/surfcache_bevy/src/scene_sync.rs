@@ -198,7 +198,8 @@ pub fn sync_instances(
                 world.set_if_neq(WorldTransform(transform));
             }
             _ => {
-                let name = name.map_or_else(|| format!("entity{}", entity.index()), |n| n.to_string());
+                let name =
+                    name.map_or_else(|| format!("entity{}", entity.index()), |n| n.to_string());
                 commands.entity(entity).insert((
                     MeshGeometry(mesh),
                     SurfaceMaterial(material),

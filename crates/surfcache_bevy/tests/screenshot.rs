@@ -91,12 +91,21 @@ fn display() -> Result<Option<Option<Xvfb>>, String> {
     }
     let number = 90 + std::process::id() % 400;
     let child = match Command::new("Xvfb")
-        .args([&format!(":{number}"), "-screen", "0", "1024x768x24", "-nolisten", "tcp"])
+        .args([
+            &format!(":{number}"),
+            "-screen",
+            "0",
+            "1024x768x24",
+            "-nolisten",
+            "tcp",
+        ])
         .spawn()
     {
         Ok(c) => Xvfb(c),
         Err(e) => {
-            let why = format!("no DISPLAY and Xvfb cannot start ({e}); apt-get install xvfb mesa-vulkan-drivers");
+            let why = format!(
+                "no DISPLAY and Xvfb cannot start ({e}); apt-get install xvfb mesa-vulkan-drivers"
+            );
             if std::env::var("SURFCACHE_REQUIRE_DISPLAY").as_deref() == Ok("1") {
                 return Err(why);
             }
@@ -165,25 +174,34 @@ fn run() -> Result<Option<Figure>, String> {
               mut meshes: ResMut<Assets<Mesh>>,
               mut materials: ResMut<Assets<StandardMaterial>>,
               mut images: ResMut<Assets<Image>>| {
-            spawn_scene(&mut commands, &mut meshes, &mut materials, &mut images, &scenes::cornell());
+            spawn_scene(
+                &mut commands,
+                &mut meshes,
+                &mut materials,
+                &mut images,
+                &scenes::cornell(),
+            );
             commands.spawn((
-                matched_camera(bevy_vec(eye), bevy_vec(target), FOV, EXPOSURE, Tonemapping::None),
+                matched_camera(
+                    bevy_vec(eye),
+                    bevy_vec(target),
+                    FOV,
+                    EXPOSURE,
+                    Tonemapping::None,
+                ),
                 Msaa::Off,
             ));
         },
     )
     .add_systems(
         Update,
-        (
-            capture_when_baked,
-            move |cache: Res<BakedSurfaceCache>| {
-                if cache.is_changed()
-                    && let Ok(mut slot) = baked_out.lock()
-                {
-                    *slot = Some(cache.clone());
-                }
-            },
-        ),
+        (capture_when_baked, move |cache: Res<BakedSurfaceCache>| {
+            if cache.is_changed()
+                && let Ok(mut slot) = baked_out.lock()
+            {
+                *slot = Some(cache.clone());
+            }
+        }),
     );
     app.run();
     let shot = picture
@@ -226,7 +244,10 @@ fn run() -> Result<Option<Figure>, String> {
         let hit = traced.closest_hit(camera.eye, d, f32::INFINITY)?;
         let n = traced.geometric_normals[hit.triangle as usize];
         let p = camera.eye + d * hit.t;
-        Some(((n * 64.0).round().as_ivec3(), (n.dot(p) * 1e3).round() as i64))
+        Some((
+            (n * 64.0).round().as_ivec3(),
+            (n.dot(p) * 1e3).round() as i64,
+        ))
     };
     let mut sum = 0.0f64;
     let mut pixels = 0usize;
@@ -236,9 +257,9 @@ fn run() -> Result<Option<Figure>, String> {
             let k = (y * WIDTH as i64 + x) as usize;
             let (a, b) = (bevy[k], reference[k]);
             let Some(centre) = plane(x, y) else { continue };
-            let interior = (-1..=1)
-                .all(|j| (-1..=1).all(|i| plane(x + i, y + j) == Some(centre)));
-            let clipped = (a * EXPOSURE).max_element() >= 0.99 || (b * EXPOSURE).max_element() >= 0.99;
+            let interior = (-1..=1).all(|j| (-1..=1).all(|i| plane(x + i, y + j) == Some(centre)));
+            let clipped =
+                (a * EXPOSURE).max_element() >= 0.99 || (b * EXPOSURE).max_element() >= 0.99;
             if !interior || clipped || luminance(b) * EXPOSURE < 0.01 {
                 continue;
             }
@@ -251,7 +272,10 @@ fn run() -> Result<Option<Figure>, String> {
     let mean = sum / pixels.max(1) as f64;
     write_png(&out.join("bevy_cornell.png"), &bevy)?;
     write_png(&out.join("bevy_cornell_surfcache_render.png"), &reference)?;
-    write_png(&out.join("bevy_cornell_difference_x10.png"), &diff_image.iter().map(|d| *d / EXPOSURE).collect::<Vec<_>>())?;
+    write_png(
+        &out.join("bevy_cornell_difference_x10.png"),
+        &diff_image.iter().map(|d| *d / EXPOSURE).collect::<Vec<_>>(),
+    )?;
     eprintln!("screenshot: pictures in {}", out.display());
     Ok(Some(Figure { mean, pixels }))
 }
@@ -273,7 +297,11 @@ fn screenshot_radiance(shot: &Image) -> Result<Vec<V3>, String> {
         .chunks_exact(4)
         .take((w * h) as usize)
         .map(|p| {
-            let (r, g, b) = if bgra { (p[2], p[1], p[0]) } else { (p[0], p[1], p[2]) };
+            let (r, g, b) = if bgra {
+                (p[2], p[1], p[0])
+            } else {
+                (p[0], p[1], p[2])
+            };
             V3::new(lut[r as usize], lut[g as usize], lut[b as usize]) / EXPOSURE
         })
         .collect())
