@@ -14,10 +14,19 @@
 //! `--screenshot FILE.png` captures the window once the first bake shows and exits.
 
 use bevy::{
+    asset::LoadState,
+    camera::{
+        primitives::Aabb,
+        visibility::{InheritedVisibility, ViewVisibility, VisibilityClass},
+    },
     camera_controller::free_camera::{FreeCamera, FreeCameraPlugin},
     core_pipeline::tonemapping::Tonemapping,
-    gltf::{GltfAssetLabel, GltfMaterialName},
+    gltf::{
+        GltfAssetLabel, GltfExtras, GltfMaterialExtras, GltfMaterialName, GltfMeshExtras,
+        GltfMeshName, GltfSceneExtras, GltfSceneName,
+    },
     prelude::*,
+    transform::components::TransformTreeChanged,
     window::WindowResolution,
 };
 use std::path::{Path, PathBuf};
@@ -191,10 +200,12 @@ fn main() -> std::process::ExitCode {
         plugin.config.settings.cache.set_density(4.0);
         plugin.config.settings.density_budget = None;
     }
+    // Bevy resolves a relative asset folder against the executable's: make it absolute.
     let asset_root = match &choice.file {
         Some(file) => file.parent().unwrap_or(Path::new(".")).to_path_buf(),
         None => PathBuf::from("."),
     };
+    let asset_root = std::fs::canonicalize(&asset_root).unwrap_or(asset_root);
     let capture = CaptureWhenBaked::every(10);
     let picture = capture.picture.clone();
     let mut app = App::new();
@@ -218,6 +229,29 @@ fn main() -> std::process::ExitCode {
     ))
     .insert_resource(GlobalAmbientLight::NONE)
     .insert_resource(ClearColor(Color::srgb(0.05, 0.05, 0.07)))
+    // Bevy spawns glTF scenes by reflection. Without Bevy's default features (this crate
+    // builds only what it uses, not `reflect_auto_register`) the components a glTF scene
+    // holds must be registered by hand.
+    .register_type::<Name>()
+    .register_type::<Transform>()
+    .register_type::<GlobalTransform>()
+    .register_type::<TransformTreeChanged>()
+    .register_type::<Visibility>()
+    .register_type::<InheritedVisibility>()
+    .register_type::<ViewVisibility>()
+    .register_type::<VisibilityClass>()
+    .register_type::<ChildOf>()
+    .register_type::<Children>()
+    .register_type::<Mesh3d>()
+    .register_type::<MeshMaterial3d<StandardMaterial>>()
+    .register_type::<Aabb>()
+    .register_type::<GltfMeshName>()
+    .register_type::<GltfMaterialName>()
+    .register_type::<GltfSceneName>()
+    .register_type::<GltfExtras>()
+    .register_type::<GltfMeshExtras>()
+    .register_type::<GltfMaterialExtras>()
+    .register_type::<GltfSceneExtras>()
     .insert_resource(Viewer {
         eye: choice.eye,
         target: choice.target,
@@ -225,17 +259,28 @@ fn main() -> std::process::ExitCode {
         movable: choice.movable,
         emission: choice.emission,
         file: choice.file.clone(),
+        loading: None,
         environment,
         moved: false,
         last: None,
     })
     .add_systems(Startup, setup)
-    .add_systems(Update, (scale_emission, move_object, show_progress));
+    .add_systems(
+        Update,
+        (
+            scale_emission,
+            move_object,
+            show_progress,
+            stop_on_load_failure,
+        ),
+    );
     if args.screenshot.is_some() {
         app.insert_resource(capture)
             .add_systems(Update, capture_when_baked);
     }
-    app.run();
+    if app.run() != AppExit::Success {
+        return std::process::ExitCode::FAILURE;
+    }
     if let Some(path) = &args.screenshot {
         let Some(shot) = picture.lock().ok().and_then(|mut p| p.take()) else {
             eprintln!("error: the window closed before a screenshot settled");
@@ -259,6 +304,8 @@ struct Viewer {
     movable: &'static str,
     emission: f32,
     file: Option<PathBuf>,
+    /// The glTF scene being loaded.
+    loading: Option<Handle<WorldAsset>>,
     environment: Option<surfcache_core::EnvironmentMap>,
     /// Whether the movable object is moved away from its place.
     moved: bool,
@@ -276,7 +323,7 @@ fn setup(
     mut materials: ResMut<Assets<StandardMaterial>>,
     mut images: ResMut<Assets<Image>>,
     assets: Res<AssetServer>,
-    viewer: Res<Viewer>,
+    mut viewer: ResMut<Viewer>,
 ) {
     match &viewer.file {
         None => {
@@ -294,9 +341,9 @@ fn setup(
                 .unwrap_or_default()
                 .to_string_lossy()
                 .into_owned();
-            commands.spawn(WorldAssetRoot(
-                assets.load(GltfAssetLabel::Scene(0).from_asset(name)),
-            ));
+            let scene = assets.load(GltfAssetLabel::Scene(0).from_asset(name));
+            viewer.loading = Some(scene.clone());
+            commands.spawn(WorldAssetRoot(scene));
             if let Some(map) = &viewer.environment {
                 commands.insert_resource(BakeEnvironment {
                     image: Some(images.add(environment_image(map))),
@@ -326,6 +373,20 @@ fn setup(
         },
         ProgressText,
     ));
+}
+
+/// Ends the app with an error when the glTF scene cannot be loaded.
+fn stop_on_load_failure(
+    viewer: Res<Viewer>,
+    assets: Res<AssetServer>,
+    mut exit: MessageWriter<AppExit>,
+) {
+    if let Some(scene) = &viewer.loading
+        && let LoadState::Failed(e) = assets.load_state(scene)
+    {
+        eprintln!("error: {e}");
+        exit.write(AppExit::error());
+    }
 }
 
 /// Scales loaded materials' emission (once each), for scenes with LDR lamps.

@@ -24,7 +24,7 @@ use crate::{
     mesh::mesh_from_bevy,
 };
 use bevy::{
-    asset::{AssetEvent, AssetId, Assets},
+    asset::{AssetEvent, AssetId, AssetServer, Assets, LoadState},
     ecs::system::SystemParam,
     image::Image,
     light::{DirectionalLight, PointLight, SpotLight},
@@ -99,6 +99,7 @@ impl ConvertedAssets {
         &mut self,
         assets: &Assets<StandardMaterial>,
         images: &Assets<Image>,
+        server: Option<&AssetServer>,
         id: AssetId<StandardMaterial>,
     ) -> Option<Arc<CoreMaterial>> {
         if !self.materials.contains_key(&id) {
@@ -108,7 +109,14 @@ impl ConvertedAssets {
                 if let Some(t) = textures.get(&image) {
                     return Ok(t.as_ref().ok().cloned());
                 }
+                let failed =
+                    || server.is_some_and(|s| matches!(s.load_state(image), LoadState::Failed(_)));
                 match texture_from_image(images, image) {
+                    Err(MaterialError::Loading) if failed() => {
+                        warn!("surfcache: texture {image} failed to load; left out of the bake");
+                        textures.insert(image, Err("failed to load".into()));
+                        Ok(None)
+                    }
                     Err(MaterialError::Loading) => Err(MaterialError::Loading),
                     Err(MaterialError::Unreadable(e)) => {
                         warn!("surfcache: texture {image} left out of the bake: {e}");
@@ -137,6 +145,9 @@ pub struct SceneAssets<'w, 's> {
     meshes: Res<'w, Assets<Mesh>>,
     materials: Res<'w, Assets<StandardMaterial>>,
     images: Res<'w, Assets<Image>>,
+    /// Tells textures that failed to load from those still loading (absent in apps
+    /// without an asset server).
+    server: Option<Res<'w, AssetServer>>,
     mesh_events: MessageReader<'w, 's, AssetEvent<Mesh>>,
     material_events: MessageReader<'w, 's, AssetEvent<StandardMaterial>>,
     image_events: MessageReader<'w, 's, AssetEvent<Image>>,
@@ -171,6 +182,7 @@ pub fn sync_instances(
         meshes,
         materials,
         images,
+        server,
         mesh_events,
         material_events,
         image_events,
@@ -183,7 +195,9 @@ pub fn sync_instances(
         let Some(mesh) = converted.mesh(meshes, source.id()) else {
             continue;
         };
-        let Some(material) = converted.material(materials, images, material.id()) else {
+        let Some(material) =
+            converted.material(materials, images, server.as_deref(), material.id())
+        else {
             continue;
         };
         let transform = glam_bridge::affine3a(transform.affine());
