@@ -15,6 +15,7 @@
 
 use bevy::{
     asset::LoadState,
+    camera::Exposure,
     camera::{
         primitives::Aabb,
         visibility::{InheritedVisibility, ViewVisibility, VisibilityClass},
@@ -31,12 +32,12 @@ use bevy::{
 };
 use std::path::{Path, PathBuf};
 use surfcache_bevy::{
-    BakeEnvironment, BakeFinished, BakeStatus, SurfcacheBevyPlugin,
+    BakeEnvironment, BakeFinished, BakeStatus, SceneSpawner, SurfcacheBevyPlugin,
     environment::environment_image,
-    spawn_scene,
-    view::{CaptureWhenBaked, capture_when_baked, matched_camera},
+    view::{CaptureWhenBaked, capture_when_baked, ev100_for_exposure, matched_camera},
 };
 use surfcache_core::scenes;
+use surfcache_ecs::PublishedLightmaps;
 
 /// What to show, from the command line.
 #[derive(Resource, Clone, Debug)]
@@ -102,7 +103,8 @@ struct Choice {
     env: Option<PathBuf>,
     eye: Vec3,
     target: Vec3,
-    exposure: f32,
+    /// Camera exposure (`None`: set from the first bake).
+    exposure: Option<f32>,
     /// Name or glTF material name of the object Space moves.
     movable: &'static str,
     /// Emission scale (the Cornell box with Suzanne has an LDR lamp).
@@ -120,7 +122,7 @@ fn choose(args: &Args) -> Result<Choice, String> {
                 env: None,
                 eye: Vec3::from_array(eye.to_array()),
                 target: Vec3::from_array(target.to_array()),
-                exposure: 0.5,
+                exposure: Some(0.5),
                 movable: "short_block",
                 emission: 1.0,
             }
@@ -130,7 +132,7 @@ fn choose(args: &Args) -> Result<Choice, String> {
             env: Some(shared("envmaps/immenstadter_horn_1k.exr")),
             eye: Vec3::new(-11.0, 1.7, -0.4),
             target: Vec3::new(5.0, 4.0, 0.4),
-            exposure: 4e-3,
+            exposure: None,
             movable: "vase_round",
             emission: 1.0,
         },
@@ -139,7 +141,7 @@ fn choose(args: &Args) -> Result<Choice, String> {
             env: None,
             eye: Vec3::new(0.0, 0.0, 3.6),
             target: Vec3::ZERO,
-            exposure: 0.25,
+            exposure: None,
             movable: "Suzanne",
             emission: 20.0,
         },
@@ -148,7 +150,7 @@ fn choose(args: &Args) -> Result<Choice, String> {
             env: None,
             eye: Vec3::new(0.0, 1.7, 5.0),
             target: Vec3::new(0.0, 1.0, 0.0),
-            exposure: 0.1,
+            exposure: None,
             movable: "",
             emission: 1.0,
         },
@@ -156,8 +158,8 @@ fn choose(args: &Args) -> Result<Choice, String> {
     if let Some(env) = &args.env {
         choice.env = Some(env.clone());
     }
-    if let Some(e) = args.exposure {
-        choice.exposure = e;
+    if args.exposure.is_some() {
+        choice.exposure = args.exposure;
     }
     if let Some(file) = &choice.file
         && !file.is_file()
@@ -271,6 +273,7 @@ fn main() -> std::process::ExitCode {
             scale_emission,
             move_object,
             show_progress,
+            auto_exposure,
             stop_on_load_failure,
         ),
     );
@@ -300,7 +303,8 @@ fn main() -> std::process::ExitCode {
 struct Viewer {
     eye: Vec3,
     target: Vec3,
-    exposure: f32,
+    /// `None` until the first bake sets it.
+    exposure: Option<f32>,
     movable: &'static str,
     emission: f32,
     file: Option<PathBuf>,
@@ -317,23 +321,10 @@ struct Viewer {
 #[derive(Component)]
 struct ProgressText;
 
-fn setup(
-    mut commands: Commands,
-    mut meshes: ResMut<Assets<Mesh>>,
-    mut materials: ResMut<Assets<StandardMaterial>>,
-    mut images: ResMut<Assets<Image>>,
-    assets: Res<AssetServer>,
-    mut viewer: ResMut<Viewer>,
-) {
+fn setup(mut spawner: SceneSpawner, assets: Res<AssetServer>, mut viewer: ResMut<Viewer>) {
     match &viewer.file {
         None => {
-            spawn_scene(
-                &mut commands,
-                &mut meshes,
-                &mut materials,
-                &mut images,
-                &scenes::cornell(),
-            );
+            spawner.spawn(&scenes::cornell());
         }
         Some(file) => {
             let name = file
@@ -343,26 +334,26 @@ fn setup(
                 .into_owned();
             let scene = assets.load(GltfAssetLabel::Scene(0).from_asset(name));
             viewer.loading = Some(scene.clone());
-            commands.spawn(WorldAssetRoot(scene));
+            spawner.commands.spawn(WorldAssetRoot(scene));
             if let Some(map) = &viewer.environment {
-                commands.insert_resource(BakeEnvironment {
-                    image: Some(images.add(environment_image(map))),
+                spawner.commands.insert_resource(BakeEnvironment {
+                    image: Some(spawner.images.add(environment_image(map))),
                     intensity: 1.0,
                 });
             }
         }
     }
-    commands.spawn((
+    spawner.commands.spawn((
         matched_camera(
             viewer.eye,
             viewer.target,
             40.0,
-            viewer.exposure,
+            viewer.exposure.unwrap_or(1.0),
             Tonemapping::AcesFitted,
         ),
         FreeCamera::default(),
     ));
-    commands.spawn((
+    spawner.commands.spawn((
         Text::new("loading"),
         TextFont::from_font_size(18.0),
         Node {
@@ -373,6 +364,30 @@ fn setup(
         },
         ProgressText,
     ));
+}
+
+/// Without `--exposure`: once the first bake is published, exposes the view as
+/// `surfcache render` does by default (95th percentile to 0.8), taking the lightmaps'
+/// radiance on a mid-grey surface (albedo 0.5) as the picture's.
+fn auto_exposure(
+    mut viewer: ResMut<Viewer>,
+    published: Res<PublishedLightmaps>,
+    mut cameras: Query<&mut Exposure>,
+) {
+    if viewer.exposure.is_some() || published.generation == 0 {
+        return;
+    }
+    let radiance: Vec<glam::Vec3> = published
+        .by_entity
+        .values()
+        .filter_map(|l| l.front.as_ref())
+        .flat_map(|t| t.texels.iter().map(|e| *e * (0.5 / std::f32::consts::PI)))
+        .collect();
+    let exposure = surfcache_cli::picture::auto_exposure(&radiance);
+    viewer.exposure = Some(exposure);
+    for mut camera in &mut cameras {
+        camera.ev100 = ev100_for_exposure(exposure);
+    }
 }
 
 /// Ends the app with an error when the glTF scene cannot be loaded.
@@ -402,7 +417,7 @@ fn scale_emission(
         if let AssetEvent::Added { id } = e
             && let Some(mut m) = materials.get_mut(*id)
         {
-            m.emissive = m.emissive * viewer.emission;
+            m.emissive *= viewer.emission;
         }
     }
 }

@@ -58,5 +58,5 @@ pub use environment::BakeEnvironment;
 pub use light::LightBaking;
 pub use lightmap::{LIGHTMAP_SCALE, LightmappedMesh};
 pub use plugin::{SurfcacheBevyPlugin, SurfcacheBevySystems};
-pub use spawn::spawn_scene;
+pub use spawn::{SceneSpawner, spawn_scene};
 pub use surfcache_ecs::{BakeConfig, BakeFinished, BakeStatus};

@@ -43,7 +43,7 @@ pub fn mesh_from_bevy(mesh: &Mesh, name: &str) -> Result<CoreMesh, String> {
         Some(indices) => indices.iter().map(|i| i as u32).collect(),
         None => (0..positions.len() as u32).collect(),
     };
-    if corners.len() % 3 != 0 {
+    if !corners.len().is_multiple_of(3) {
         return Err(format!(
             "mesh '{name}' has {} indices, not a multiple of 3",
             corners.len()

@@ -33,7 +33,10 @@ use bevy::{
     pbr::{MeshMaterial3d, StandardMaterial},
     prelude::*,
 };
-use std::{collections::HashMap, sync::Arc};
+use std::{
+    collections::{HashMap, hash_map::Entry},
+    sync::Arc,
+};
 use surfcache_core::{Material as CoreMaterial, Mesh as CoreMesh, Texture};
 use surfcache_ecs::{
     EnvironmentLight, InstanceName, MeshGeometry, PunctualLight, SurfaceMaterial, WorldTransform,
@@ -82,15 +85,17 @@ impl ConvertedAssets {
 
     /// The converted mesh `id`; `None` while it loads or when it cannot be baked.
     fn mesh(&mut self, assets: &Assets<Mesh>, id: AssetId<Mesh>) -> Option<Arc<CoreMesh>> {
-        if !self.meshes.contains_key(&id) {
-            let mesh = assets.get(id)?;
-            let converted = mesh_from_bevy(mesh, &format!("{id}")).map(Arc::new);
-            if let Err(e) = &converted {
-                warn!("surfcache: not baked: {e}");
+        let converted = match self.meshes.entry(id) {
+            Entry::Occupied(e) => e.into_mut(),
+            Entry::Vacant(e) => {
+                let converted = mesh_from_bevy(assets.get(id)?, &format!("{id}")).map(Arc::new);
+                if let Err(why) = &converted {
+                    warn!("surfcache: not baked: {why}");
+                }
+                e.insert(converted)
             }
-            self.meshes.insert(id, converted);
-        }
-        self.meshes[&id].as_ref().ok().cloned()
+        };
+        converted.as_ref().ok().cloned()
     }
 
     /// The converted material `id`; `None` while it or its textures load. A texture that
@@ -170,12 +175,15 @@ type Instances<'w, 's> = Query<
     ),
 >;
 
+/// Mirrored entities that are no longer Bevy mesh entities.
+type LeftTheScene = (With<MirroredByPlugin>, With<MeshGeometry>, Without<Mesh3d>);
+
 /// Scene sync of mesh entities (module docs).
 pub fn sync_instances(
     mut commands: Commands,
     mut assets: SceneAssets,
     mut instances: Instances,
-    gone: Query<Entity, (With<MirroredByPlugin>, With<MeshGeometry>, Without<Mesh3d>)>,
+    gone: Query<Entity, LeftTheScene>,
 ) {
     let SceneAssets {
         converted,

@@ -10,8 +10,31 @@ use crate::{
     material::standard_material,
     mesh::bevy_mesh,
 };
-use bevy::prelude::*;
+use bevy::{ecs::system::SystemParam, prelude::*};
 use surfcache_core::Scene;
+
+/// What spawning a plain scene needs, as one system parameter:
+/// `|mut spawner: SceneSpawner| { spawner.spawn(&scenes::cornell()); }` is a system.
+#[derive(SystemParam)]
+pub struct SceneSpawner<'w, 's> {
+    pub commands: Commands<'w, 's>,
+    pub meshes: ResMut<'w, Assets<Mesh>>,
+    pub materials: ResMut<'w, Assets<StandardMaterial>>,
+    pub images: ResMut<'w, Assets<Image>>,
+}
+
+impl SceneSpawner<'_, '_> {
+    /// Spawns `scene` ([`spawn_scene`]).
+    pub fn spawn(&mut self, scene: &Scene) -> Vec<Entity> {
+        spawn_scene(
+            &mut self.commands,
+            &mut self.meshes,
+            &mut self.materials,
+            &mut self.images,
+            scene,
+        )
+    }
+}
 
 /// Spawns `scene`'s instances (named after them), lights and environment into a Bevy
 /// world; returns the instance entities in scene order. Lights are spawned without

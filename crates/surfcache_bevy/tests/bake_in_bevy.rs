@@ -10,8 +10,8 @@ use bevy::{
 use half::f16;
 use std::time::{Duration, Instant};
 use surfcache_bevy::{
-    BakeConfig, BakeFinished, LightBaking, LightmappedMesh, SurfcacheBevyPlugin, mesh::has_uv1,
-    spawn_scene,
+    BakeConfig, BakeFinished, LightBaking, LightmappedMesh, SceneSpawner, SurfcacheBevyPlugin,
+    mesh::has_uv1,
 };
 use surfcache_cache::{CacheSettings, Method, bake::BakeSettings};
 use surfcache_core::{Environment, Instance, Material, Scene, scenes};
@@ -54,20 +54,7 @@ fn app() -> App {
 
 fn spawn(app: &mut App, scene: Scene) -> Vec<Entity> {
     app.world_mut()
-        .run_system_once(
-            move |mut commands: Commands,
-                  mut meshes: ResMut<Assets<Mesh>>,
-                  mut materials: ResMut<Assets<StandardMaterial>>,
-                  mut images: ResMut<Assets<Image>>| {
-                spawn_scene(
-                    &mut commands,
-                    &mut meshes,
-                    &mut materials,
-                    &mut images,
-                    &scene,
-                )
-            },
-        )
+        .run_system_once(move |mut spawner: SceneSpawner| spawner.spawn(&scene))
         .unwrap()
 }
 

@@ -24,7 +24,7 @@ use std::{
     time::{Duration, Instant},
 };
 use surfcache_bevy::{
-    SurfcacheBevyPlugin, spawn_scene,
+    SceneSpawner, SurfcacheBevyPlugin,
     view::{CaptureWhenBaked, capture_when_baked, matched_camera},
 };
 use surfcache_cache::SurfaceCache;
@@ -168,31 +168,19 @@ fn run() -> Result<Option<Figure>, String> {
     .insert_resource(GlobalAmbientLight::NONE)
     .insert_resource(ClearColor(Color::BLACK))
     .insert_resource(capture)
-    .add_systems(
-        Startup,
-        move |mut commands: Commands,
-              mut meshes: ResMut<Assets<Mesh>>,
-              mut materials: ResMut<Assets<StandardMaterial>>,
-              mut images: ResMut<Assets<Image>>| {
-            spawn_scene(
-                &mut commands,
-                &mut meshes,
-                &mut materials,
-                &mut images,
-                &scenes::cornell(),
-            );
-            commands.spawn((
-                matched_camera(
-                    bevy_vec(eye),
-                    bevy_vec(target),
-                    FOV,
-                    EXPOSURE,
-                    Tonemapping::None,
-                ),
-                Msaa::Off,
-            ));
-        },
-    )
+    .add_systems(Startup, move |mut spawner: SceneSpawner| {
+        spawner.spawn(&scenes::cornell());
+        spawner.commands.spawn((
+            matched_camera(
+                bevy_vec(eye),
+                bevy_vec(target),
+                FOV,
+                EXPOSURE,
+                Tonemapping::None,
+            ),
+            Msaa::Off,
+        ));
+    })
     .add_systems(
         Update,
         (capture_when_baked, move |cache: Res<BakedSurfaceCache>| {
