@@ -19,6 +19,8 @@
 //! - **Storage.** Three half floats a texel ([`crate::stored_rgb`]) with one power-of-two
 //!   [`StoreScale`].
 
+mod guides;
+
 use crate::burial::Burial;
 use crate::{
     CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
@@ -29,13 +31,14 @@ use crate::{
     stored_rgb::{STORED_RGB_BYTES, StoreScale, StoredRgb},
 };
 use glam::{Vec2, Vec3};
+use guides::TexelGuides;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use surfcache_core::{
     geometry::{closest_point_barycentric, interpolate, triangle_area},
     sampling::splitmix64,
 };
-use surfcache_trace::{Estimate, EstimatorSettings, TracedScene};
+use surfcache_trace::{Estimate, EstimatorSettings, Guidance, TracedScene};
 
 /// How lightmaps are laid out and which texels are trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -65,6 +68,15 @@ pub struct LightmapSettings {
     /// the bake plans rounds ([`SurfaceCache::plan_sampling`]).
     #[serde(default)]
     pub filter: FilterSettings,
+    /// Texels that need more than the first round draw their directions through a guide
+    /// learnt from the first round of their block ([`guides`]; docs/design.md, Guiding).
+    /// Default true.
+    #[serde(default = "guiding_default")]
+    pub guiding: bool,
+}
+
+fn guiding_default() -> bool {
+    true
 }
 
 impl Default for LightmapSettings {
@@ -76,6 +88,7 @@ impl Default for LightmapSettings {
             both_sides: true,
             buried_threshold: 0.5,
             filter: FilterSettings::default(),
+            guiding: true,
         }
     }
 }
@@ -183,6 +196,9 @@ pub struct Lightmaps {
     /// Hemisphere samples the feet took (counted in the statistics).
     #[serde(skip)]
     foot_samples: u64,
+    /// While baking: every round's records and the guides of the next round.
+    #[serde(skip)]
+    guides: TexelGuides,
     emitted: bool,
     /// Stored texels of all layers.
     packed: Vec<StoredRgb>,
@@ -270,6 +286,7 @@ impl Lightmaps {
             feet: Vec::new(),
             foot_lines: Vec::new(),
             foot_samples: 0,
+            guides: TexelGuides::default(),
             emitted: false,
             packed: vec![[0; 3]; layers * layer_texels],
             sample_counts: Vec::new(),
@@ -630,6 +647,7 @@ impl Lightmaps {
         self.exits = Vec::new();
         self.foot_sites = Vec::new();
         self.feet = Vec::new();
+        self.guides = TexelGuides::default();
     }
 
     /// Probes every owned slot for crossings near its texel ([`crossings::probe`], as far
@@ -1135,6 +1153,11 @@ impl SurfaceCache for Lightmaps {
             Some(plan) if self.priors.is_empty() => Some(plan.first),
             _ => None,
         };
+        if let Some(plan) = self.plan.filter(|p| {
+            self.settings.guiding && self.priors.is_empty() && p.bound > 0.0 && p.max > p.first
+        }) {
+            self.guides = TexelGuides::recording(&self.maps, &self.owner, self.layers, plan.floor);
+        }
         self.probe_crossings(scene);
         for layer in 0..self.layers {
             for m in &self.maps {
@@ -1178,6 +1201,18 @@ impl SurfaceCache for Lightmaps {
 
     fn later_samples(&self) -> Option<u64> {
         Some(self.later_samples)
+    }
+
+    /// Every round records into its texels' blocks; rounds after the first draw through
+    /// their blocks' guides ([`guides`]). Feet do neither.
+    fn guidance(&self, i: usize) -> Guidance<'_> {
+        match self.slots.get(i) {
+            Some(&slot) => Guidance {
+                record: self.guides.record(slot as usize),
+                guide: self.guides.guide(slot as usize),
+            },
+            None => Guidance::default(),
+        }
     }
 
     /// Merges the round's estimates into their texels, marks buried ones (first round),
@@ -1254,6 +1289,8 @@ impl SurfaceCache for Lightmaps {
                 }
             }
         }
+        self.guides
+            .learn(self.pending.iter().map(|&(slot, _)| slot as usize));
         if self.pending.is_empty() {
             self.emitted = true;
             self.finish(
