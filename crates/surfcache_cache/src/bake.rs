@@ -469,7 +469,7 @@ pub const BOUNCE_PASS_DENSITY: f32 = 0.5;
 /// Bounce passes stop once the energy the final pass would still leave out, predicted
 /// from the geometric decay of the energy each pass added, is below this share of the
 /// error bound.
-pub const BOUNCE_TAIL_SHARE: f32 = 0.125;
+pub const BOUNCE_TAIL_SHARE: f32 = 0.25;
 
 /// Random surface points at which [`BakeJob`] compares consecutive bounce passes.
 pub const BOUNCE_PROBES: u32 = 16_384;
@@ -731,6 +731,9 @@ impl BakeJob {
         } else {
             let mut cache = s.cache;
             cache.scale_density(BOUNCE_PASS_DENSITY);
+            // A bounce pass reaches the final cache only through gathers over whole
+            // hemispheres, which average its noise: guiding would cost more than it buys.
+            cache.disable_guiding();
             (cache, bounce_pass_estimator(k, &s.estimator))
         };
         // Bounce passes draw from streams of their own, the same stream in every bounce

@@ -325,6 +325,13 @@ impl CacheSettings {
         }
     }
 
+    /// Turns guided sampling off (only lightmaps guide; docs/design.md, Guiding).
+    pub fn disable_guiding(&mut self) {
+        if let Self::Lightmap(s) = self {
+            s.guiding = false;
+        }
+    }
+
     /// The irradiance-map refinement bound (ignored by the other caches).
     pub fn set_interpolation_error(&mut self, bound: f32) {
         if let Self::IrradianceMap(s) = self {

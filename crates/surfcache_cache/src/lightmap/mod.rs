@@ -9,9 +9,11 @@
 //!   (conservative rasterisation, [`conservative_texels`]). A texel belongs to one
 //!   triangle: the one containing its centre, else the nearest; it is estimated at the
 //!   centre, or at the closest point of its triangle, nudged inside.
-//! - **One round.** Every owned texel is one [`SampleSite::Surface`] on the front side, and
+//! - **Rounds.** Every owned texel is one [`SampleSite::Surface`] on the front side, and
 //!   on the back side in a second layer when [`LightmapSettings::both_sides`]; texels are
-//!   adaptive through the estimator's stopping rule, not through refinement.
+//!   adaptive through rounds of doubling samples where their filtered error is still above
+//!   the bound, not through refinement. Rounds after the first draw their directions
+//!   through the guide their block of texels learnt ([`guides`]; docs/design.md, Guiding).
 //! - **Buried texels** (estimates whose first rays mostly hit back faces: the texel lies
 //!   inside other geometry) are refilled from valid neighbours, and texels owned by no
 //!   triangle are **dilated** from their neighbours `gutter` times, so that bilinear
