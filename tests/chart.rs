@@ -32,15 +32,22 @@ fn tiny_sweep_writes_csv_charts_and_summary() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next(),
-        Some("scene,method,sampler,bound,seconds,rel_rms,bytes,sample_points")
+        Some("scene,method,sampler,bound,seconds,rel_rms,bytes,sample_points,median_rel,p90_rel")
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 1, "{csv}");
     let row = &rows[0];
     assert_eq!(&row[..4], ["cornell", "vertex", "best", "0.2"]);
-    for (name, value) in ["seconds", "rel_rms", "bytes", "sample_points"]
-        .iter()
-        .zip(&row[4..])
+    for (name, value) in [
+        "seconds",
+        "rel_rms",
+        "bytes",
+        "sample_points",
+        "median_rel",
+        "p90_rel",
+    ]
+    .iter()
+    .zip(&row[4..])
     {
         let v: f64 = value
             .parse()
@@ -84,4 +91,39 @@ fn tiny_sweep_writes_csv_charts_and_summary() {
         std::fs::read_to_string(out.join("speed_accuracy.csv")).unwrap(),
         csv
     );
+}
+
+#[test]
+fn replot_reads_csvs_written_before_the_median_was_kept() {
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("chart/old_csv");
+    let _ = std::fs::remove_dir_all(&out);
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(
+        out.join("speed_accuracy.csv"),
+        "scene,method,sampler,bound,seconds,rel_rms,bytes,sample_points\n\
+         cornell,lightmap,best,0.05,2.000,0.030000,1000,100\n\
+         cornell,lightmap,best,0.01,8.000,0.010000,1000,100\n\
+         cornell,vertex,best,0.01,0.000,,,\n",
+    )
+    .unwrap();
+    let replot = Command::new(SURFCACHE)
+        .args(["chart", "--replot", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        replot.status.success(),
+        "{}",
+        String::from_utf8_lossy(&replot.stderr)
+    );
+    let csv = std::fs::read_to_string(out.join("speed_accuracy.csv")).unwrap();
+    assert_eq!(
+        csv,
+        "scene,method,sampler,bound,seconds,rel_rms,bytes,sample_points,median_rel,p90_rel\n\
+         cornell,lightmap,best,0.05,2.000,0.030000,1000,100,,\n\
+         cornell,lightmap,best,0.01,8.000,0.010000,1000,100,,\n\
+         cornell,vertex,best,0.01,0.000,,,,,\n"
+    );
+    let summary = std::fs::read_to_string(out.join("speed_accuracy.md")).unwrap();
+    assert!(summary.contains("| 1.00 % | – | – |"), "{summary}");
 }

@@ -33,7 +33,8 @@ use surfcache::core::{
     scenes::{append, cuboid, quad, square},
 };
 use surfcache::trace::{
-    Estimate, EstimatorSettings, Query, Sampler, TracedScene, estimate, reference_irradiance,
+    Estimate, EstimatorSettings, PointInScene, Query, Sampler, TracedScene, estimate,
+    reference_irradiance,
 };
 
 // ---------------------------------------------------------------------------------------
@@ -524,8 +525,18 @@ fn dark_niche_black_blotches_and_how_gathering_removes_them() {
             0.01 + 0.08 * (i / 8) as f32 / 7.0,
         );
         let p = scene.locate(x, Vec3::NEG_X).unwrap();
-        let e = estimate(&scene, &p, scene.spawn_origin(&p), &full, 5, i, None);
-        let e0 = estimate(&scene, &p, scene.spawn_origin(&p), &first, 5, i, None);
+        let e = estimate(
+            &PointInScene::new(&scene, p, scene.spawn_origin(&p)),
+            &full,
+            5,
+            i,
+        );
+        let e0 = estimate(
+            &PointInScene::new(&scene, p, scene.spawn_origin(&p)),
+            &first,
+            5,
+            i,
+        );
         black_before += (e0.value == Vec3::ZERO) as u32;
         assert!(e.value.is_finite());
         if e.value == Vec3::ZERO {
@@ -573,7 +584,12 @@ fn dark_niche_black_blotches_and_how_gathering_removes_them() {
         );
         // The floor's inner side (its front for inward walls, its back for outward ones).
         let p = boxed.locate(v(0.5, 0.0, 0.5), Vec3::Y).unwrap();
-        let e = estimate(&boxed, &p, boxed.spawn_origin(&p), &settings, 5, 0, None);
+        let e = estimate(
+            &PointInScene::new(&boxed, p, boxed.spawn_origin(&p)),
+            &settings,
+            5,
+            0,
+        );
         eprintln!(
             "inside the box (walls inward: {inward}): {} samples",
             e.samples
@@ -948,13 +964,10 @@ fn hdr_sun_is_sampled_without_fireflies() {
                 };
                 let p = scene.surface_point(tri, uv, true);
                 estimate(
-                    &scene,
-                    &p,
-                    scene.spawn_origin(&p),
+                    &PointInScene::new(&scene, p, scene.spawn_origin(&p)),
                     &settings,
                     1,
                     i as u64,
-                    None,
                 )
             })
             .collect()

@@ -14,7 +14,7 @@ use surfcache_core::{
     sampling::{Cone, Rng, splitmix64},
 };
 use surfcache_trace::{
-    Estimate, EstimatorSettings, IrradianceLookup, PointInScene, Sampler, SurfacePoint,
+    Estimate, EstimatorSettings, Guidance, IrradianceLookup, PointInScene, Sampler, SurfacePoint,
     TracedScene, estimate, estimate_change, unchanged,
 };
 
@@ -126,15 +126,19 @@ pub struct Previous {
 }
 
 /// Estimates E at one sample point of a cache (with final gathering from `gather` when
-/// given: see [`IrradianceLookup`]).
+/// given: see [`IrradianceLookup`]), guided as the cache says.
 pub fn estimate_point(
     scene: &TracedScene,
     point: &SamplePoint,
     settings: &EstimatorSettings,
     seed: u64,
     gather: Option<&dyn IrradianceLookup>,
+    guidance: Guidance,
 ) -> Estimate {
     let (p, origin) = sample_frame(scene, &point.site);
+    let at = PointInScene::new(scene, p, origin)
+        .with_gather(gather)
+        .with_guidance(guidance);
     match point.budget {
         Some(n) => {
             let fixed = EstimatorSettings {
@@ -143,9 +147,9 @@ pub fn estimate_point(
                 max_samples: n,
                 ..*settings
             };
-            estimate(scene, &p, origin, &fixed, seed, point.key, gather)
+            estimate(&at, &fixed, seed, point.key)
         }
-        None => estimate(scene, &p, origin, settings, seed, point.key, gather),
+        None => estimate(&at, settings, seed, point.key),
     }
 }
 
@@ -162,13 +166,10 @@ pub fn mean_irradiance(scene: &TracedScene, points: u32, seed: u64) -> f32 {
             let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), true);
             let origin = scene.spawn_origin(&p);
             let e = estimate(
-                scene,
-                &p,
-                origin,
+                &PointInScene::new(scene, p, origin),
                 &settings,
                 seed,
                 u64::MAX - i as u64,
-                None,
             );
             luminance(e.value) as f64
         })
@@ -290,9 +291,11 @@ impl<C: SurfaceCache> Baker<C> {
         let (settings, seed) = (&self.settings, self.seed);
         let gather = self.gather.as_deref().map(|g| g as &dyn IrradianceLookup);
         let previous = self.previous.as_ref();
+        let cache = &self.cache;
         let batch: Vec<Estimate> = self.round[start..end]
             .par_iter()
-            .map(|p| {
+            .enumerate()
+            .map(|(j, p)| {
                 let change = previous.zip(p.prior).and_then(|(prev, prior)| {
                     let old_site = map_site(&prev.scene, scene, &p.site, &prev.triangle_map)?;
                     Some((prev, prior, old_site))
@@ -301,18 +304,12 @@ impl<C: SurfaceCache> Baker<C> {
                     Some((prev, prior, old_site)) => {
                         let (new_point, new_origin) = sample_frame(scene, &p.site);
                         let (old_point, old_origin) = sample_frame(&prev.scene, &old_site);
-                        let new = PointInScene {
-                            scene,
-                            point: new_point,
-                            origin: new_origin,
-                            gather,
-                        };
-                        let old = PointInScene {
-                            scene: &prev.scene,
-                            point: old_point,
-                            origin: old_origin,
-                            gather: prev.gather.as_deref().map(|g| g as &dyn IrradianceLookup),
-                        };
+                        let new =
+                            PointInScene::new(scene, new_point, new_origin).with_gather(gather);
+                        let old = PointInScene::new(&prev.scene, old_point, old_origin)
+                            .with_gather(
+                                prev.gather.as_deref().map(|g| g as &dyn IrradianceLookup),
+                            );
                         let focus = match &prev.bound {
                             Some(bound) => {
                                 let allowance = INDIRECT_SKIP_SHARE
@@ -331,7 +328,9 @@ impl<C: SurfaceCache> Baker<C> {
                         };
                         estimate_change(&old, &new, prior, settings, seed, p.key, focus.as_ref())
                     }
-                    None => estimate_point(scene, p, settings, seed, gather),
+                    None => {
+                        estimate_point(scene, p, settings, seed, gather, cache.guidance(start + j))
+                    }
                 }
             })
             .collect();
@@ -470,10 +469,13 @@ pub const BOUNCE_PASS_DENSITY: f32 = 0.5;
 /// Bounce passes stop once the energy the final pass would still leave out, predicted
 /// from the geometric decay of the energy each pass added, is below this share of the
 /// error bound.
-pub const BOUNCE_TAIL_SHARE: f32 = 0.125;
+pub const BOUNCE_TAIL_SHARE: f32 = 0.25;
 
 /// Random surface points at which [`BakeJob`] compares consecutive bounce passes.
 pub const BOUNCE_PROBES: u32 = 16_384;
+
+/// Key of the random streams every bounce pass draws from (the same in each pass).
+const BOUNCE_STREAM: u64 = 0x6761_7468_6572;
 
 /// Estimator settings of a bounce pass before a final pass with `final_estimator`: 4×
 /// the error bound (at most 10 %), a quarter of the sample limits (at least 16).
@@ -624,8 +626,11 @@ impl BakeOutcome {
 /// looser error bound ([`bounce_pass_estimator`]); their noise reaches the final cache
 /// only averaged over the hemispheres that gather it.
 ///
-/// After every bounce pass k ≥ 1 the light it added, `a_k = mean (Y_k − Y_{k−1}) / (Y_k + ε)`
-/// (luminance of both caches at [`BOUNCE_PROBES`] random surface points, each point's
+/// Every bounce pass draws the same random streams (*common random numbers*): a texel's
+/// samples take the same directions in pass k as in pass k − 1, so the two passes differ
+/// by the bounce pass k added and hardly by their noise. After every bounce pass k ≥ 1
+/// the light it added, `a_k = mean (Y_k − Y_{k−1}) / (Y_k + ε)` (luminance of both caches
+/// at the [`BOUNCE_PROBES`] random surface points that pass k lights above ε, each point's
 /// share of its own irradiance, so that a gallery lit only by bounces counts as much as a
 /// sunlit wall), is compared with the pass before: the series decays like
 /// `r = a_k / a_{k−1}`, so the final pass (one more bounce) leaves out about
@@ -726,13 +731,17 @@ impl BakeJob {
         } else {
             let mut cache = s.cache;
             cache.scale_density(BOUNCE_PASS_DENSITY);
+            // A bounce pass reaches the final cache only through gathers over whole
+            // hemispheres, which average its noise: guiding would cost more than it buys.
+            cache.disable_guiding();
             (cache, bounce_pass_estimator(k, &s.estimator))
         };
-        // Bounce passes draw from streams of their own.
+        // Bounce passes draw from streams of their own, the same stream in every bounce
+        // pass (module docs: common random numbers).
         let seed = if self.final_pass {
             s.seed
         } else {
-            s.seed ^ splitmix64(0x6761_7468_6572 + k as u64)
+            s.seed ^ splitmix64(BOUNCE_STREAM)
         };
         let cache = match self.layout.take() {
             Some((settings, fresh)) if settings == cache_settings => fresh,
@@ -772,7 +781,8 @@ impl BakeJob {
             .collect();
     }
 
-    /// `a_k` of the pass just finished (module docs).
+    /// `a_k` of the pass just finished (module docs): the mean over the probes that the
+    /// pass lights (above the floor ε) of the share of their light it added.
     fn energy_added(&self) -> f64 {
         let k = self.passes.len();
         let Some(latest) = self.passes.last() else {
@@ -784,8 +794,8 @@ impl BakeJob {
         for &(t, uv, front) in &self.probes {
             let now = luminance(latest.lookup(t, uv, front)) as f64;
             let was = before.map_or(0.0, |b| luminance(b.lookup(t, uv, front)) as f64);
-            if now.is_finite() && was.is_finite() {
-                sum += (now - was) / (now.abs() + floor).max(f64::MIN_POSITIVE);
+            if now.is_finite() && was.is_finite() && now > floor {
+                sum += (now - was) / (now + floor);
                 count += 1;
             }
         }

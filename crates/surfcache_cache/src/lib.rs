@@ -32,7 +32,7 @@ pub mod vertex_lighting;
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use surfcache_trace::{Estimate, EstimatorSettings, IrradianceLookup, TracedScene};
+use surfcache_trace::{Estimate, EstimatorSettings, Guidance, IrradianceLookup, TracedScene};
 
 pub use irradiance_map::{IrradianceMapSettings, IrradianceMaps};
 pub use lightmap::{LightmapSettings, Lightmaps};
@@ -162,6 +162,13 @@ pub trait SurfaceCache: Send + Sync {
     /// out, if it can tell (progress reports use it; `None` leaves them counting points).
     fn later_samples(&self) -> Option<u64> {
         None
+    }
+
+    /// How point `i` of the round [`Self::next_round`] last produced draws its directions
+    /// and what it records for later rounds (docs/design.md, Guiding). The default:
+    /// plain cosine-weighted directions, nothing recorded.
+    fn guidance(&self, _i: usize) -> Guidance<'_> {
+        Guidance::default()
     }
 
     /// Takes the estimates of the points the last [`Self::next_round`] produced, in the
@@ -318,6 +325,13 @@ impl CacheSettings {
         }
     }
 
+    /// Turns guided sampling off (only lightmaps guide; docs/design.md, Guiding).
+    pub fn disable_guiding(&mut self) {
+        if let Self::Lightmap(s) = self {
+            s.guiding = false;
+        }
+    }
+
     /// The irradiance-map refinement bound (ignored by the other caches).
     pub fn set_interpolation_error(&mut self, bound: f32) {
         if let Self::IrradianceMap(s) = self {
@@ -386,6 +400,10 @@ impl SurfaceCache for Cache {
 
     fn later_samples(&self) -> Option<u64> {
         self.inner().later_samples()
+    }
+
+    fn guidance(&self, i: usize) -> Guidance<'_> {
+        self.inner().guidance(i)
     }
 
     fn finish_round(

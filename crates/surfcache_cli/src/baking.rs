@@ -57,6 +57,8 @@ pub struct BakeOptions {
     pub share_corners: bool,
     /// Lightmaps: passes of the texel filter (the cache's own if `None`).
     pub filter_passes: Option<u32>,
+    /// Lightmaps: guided directions in later rounds (`--no-guiding` turns it off).
+    pub guiding: bool,
 }
 
 impl BakeOptions {
@@ -105,6 +107,12 @@ impl BakeOptions {
                 bail!("--filter-passes takes at most {MAX_FILTER_PASSES} passes");
             }
             lightmap.filter.iterations = n;
+        }
+        if !self.guiding {
+            let CacheSettings::Lightmap(lightmap) = &mut cache else {
+                bail!("--no-guiding applies to --method lightmap only");
+            };
+            lightmap.guiding = false;
         }
         Ok(BakeSettings {
             cache,

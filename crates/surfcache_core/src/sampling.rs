@@ -83,6 +83,45 @@ pub fn cosine_hemisphere_pdf(cos_theta: f32) -> f32 {
     cos_theta.max(0.0) * FRAC_1_PI
 }
 
+/// The square point that [`cosine_hemisphere`] maps to the local direction `w` (z ≥ 0):
+/// the inverse of Malley's projection and of [`concentric_disk`]. Directed learning of
+/// where light comes from works on this square (`surfcache_trace::guiding`).
+///
+/// ```
+/// use surfcache_core::{glam::Vec2, sampling::{cosine_hemisphere, cosine_hemisphere_square}};
+/// let u = Vec2::new(0.3, 0.8);
+/// assert!((cosine_hemisphere_square(cosine_hemisphere(u)) - u).length() < 1e-5);
+/// ```
+#[inline]
+pub fn cosine_hemisphere_square(w: Vec3) -> Vec2 {
+    concentric_disk_inverse(Vec2::new(w.x, w.y))
+}
+
+/// Inverse of [`concentric_disk`]: the point of [0,1)² that maps to the disk point `d`
+/// (|d| ≤ 1), by the same four wedges.
+#[inline]
+pub fn concentric_disk_inverse(d: Vec2) -> Vec2 {
+    let r = d.length().min(1.0);
+    if r == 0.0 {
+        return Vec2::splat(0.5);
+    }
+    let quarter = 0.25 * PI;
+    let mut phi = d.y.atan2(d.x);
+    if phi < -quarter {
+        phi += TAU;
+    }
+    let o = if phi < quarter {
+        Vec2::new(r, r * phi / quarter)
+    } else if phi < 3.0 * quarter {
+        Vec2::new(r * (0.5 * PI - phi) / quarter, r)
+    } else if phi < 5.0 * quarter {
+        Vec2::new(-r, -r * (phi - PI) / quarter)
+    } else {
+        Vec2::new(-r * (1.5 * PI - phi) / quarter, -r)
+    };
+    ((o + Vec2::ONE) * 0.5).clamp(Vec2::ZERO, Vec2::splat(ONE_MINUS_EPSILON))
+}
+
 /// Shirley–Chiu concentric map from the unit square to the unit disk (pbrt-v4 §A.5.1).
 #[inline]
 pub fn concentric_disk(u: Vec2) -> Vec2 {
@@ -333,6 +372,28 @@ mod tests {
             .sum::<f64>()
             / n as f64;
         assert!((mean - 2.0 / 3.0).abs() < 3e-3, "{mean}");
+    }
+
+    #[test]
+    fn concentric_inverse_undoes_the_warp() {
+        let mut rng = Rng::new(11, 12);
+        for _ in 0..20_000 {
+            let u = rng.next_vec2();
+            let back = cosine_hemisphere_square(cosine_hemisphere(u));
+            assert!((back - u).length() < 2e-4, "{u} -> {back}");
+        }
+        // Wedge boundaries and the centre.
+        for u in [
+            Vec2::new(0.5, 0.5),
+            Vec2::new(0.9, 0.9),
+            Vec2::new(0.1, 0.9),
+            Vec2::new(0.1, 0.1),
+            Vec2::new(0.9, 0.1),
+            Vec2::new(0.0, 0.5),
+        ] {
+            let back = concentric_disk_inverse(concentric_disk(u));
+            assert!((back - u).length() < 1e-5, "{u} -> {back}");
+        }
     }
 
     #[test]

@@ -2,16 +2,18 @@
 //! with a selectable sampler and the thesis' adaptive stopping rule (docs/design.md, Estimator).
 
 use crate::{
+    guiding::{DirectionGuide, GuideRecord},
     path_tracer::{FirstHit, IrradianceLookup, PathOptions, PathSample},
     traced_scene::{SurfacePoint, TracedScene},
 };
 use glam::{DVec3, Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 use surfcache_core::{
-    geometry::to_world,
+    color::luminance,
+    geometry::{orthonormal_basis, to_world},
     sampling::{
-        Cone, Rng, UNIFORM_HEMISPHERE_PDF, cosine_hemisphere, cosine_hemisphere_pdf, sobol_4d,
-        splitmix64, uniform_hemisphere,
+        Cone, Rng, UNIFORM_HEMISPHERE_PDF, cosine_hemisphere, cosine_hemisphere_pdf,
+        cosine_hemisphere_square, sobol_4d, splitmix64, uniform_hemisphere,
     },
 };
 
@@ -238,9 +240,14 @@ impl Estimate {
 /// sample of [`TracedScene::direct_light_sample`] and the continuation's emission is
 /// MIS-weighted. Directions under the geometric surface carry no light (docs/cli.md).
 ///
+/// With a guide ([`PointInScene::guidance`]), cosine-weighted directions are drawn through
+/// it, p(ω) = cos θ/π · g(u(ω)), and both MIS weights use that density (docs/design.md,
+/// Guiding); with a record, the light the cosine-weighted ray brought is recorded at its
+/// point of the square.
+///
 /// With `focus`, X estimates the integral over the directions of that cone only: ω is
 /// drawn uniformly in the cone (p = 1/Ω), and next-event samples count only inside it,
-/// MIS-weighted against the cone density.
+/// MIS-weighted against the cone density. Guidance is not used then.
 #[inline]
 pub fn hemisphere_sample(
     at: &PointInScene,
@@ -251,14 +258,23 @@ pub fn hemisphere_sample(
 ) -> (Vec3, PathSample) {
     let (scene, p, origin) = (at.scene, &at.point, at.origin);
     let options = settings.path_options();
+    let cosine = focus.is_none() && settings.sampler != Sampler::Uniform;
+    let guide = at.guidance.guide.filter(|_| cosine);
     let u = Vec2::new(root[0], root[1]);
     let mut x = Vec3::ZERO;
     let mut rays = 0;
     if options.next_event {
         let light = Vec2::new(root[3], root[4]);
-        x += match focus {
-            None => scene.direct_light_sample(p, origin, root[2], light, &mut rays),
-            Some(cone) => {
+        x += match (focus, guide) {
+            (None, None) => scene.direct_light_sample(p, origin, root[2], light, &mut rays),
+            (None, Some(g)) => {
+                let (t, b) = orthonormal_basis(p.shading_normal);
+                scene.direct_light_sample_against(p, origin, root[2], light, &mut rays, |cos, w| {
+                    let square = cosine_hemisphere_square(Vec3::new(t.dot(w), b.dot(w), cos));
+                    Some(cosine_hemisphere_pdf(cos) * g.density(square))
+                })
+            }
+            (Some(cone), _) => {
                 let pdf = 1.0 / cone.solid_angle();
                 scene.direct_light_sample_against(p, origin, root[2], light, &mut rays, |_, w| {
                     cone.contains(w).then_some(pdf)
@@ -266,6 +282,11 @@ pub fn hemisphere_sample(
             }
         };
     }
+    // The point of the square the direction comes from and the guide's density there.
+    let (square, density) = match guide {
+        Some(g) => g.sample(u),
+        None => (u, 1.0),
+    };
     let (w, weight, pdf) = match (focus, settings.sampler) {
         (Some(cone), _) => {
             let w = cone.sample(u);
@@ -277,14 +298,22 @@ pub fn hemisphere_sample(
             let w = to_world(l, p.shading_normal);
             (w, l.z / UNIFORM_HEMISPHERE_PDF, UNIFORM_HEMISPHERE_PDF)
         }
-        // cos θ / (cos θ/π) = π
+        // cos θ / (cos θ/π · g) = π / g
         (None, _) => {
-            let l = cosine_hemisphere(u);
+            let l = cosine_hemisphere(square);
             let w = to_world(l, p.shading_normal);
-            (w, core::f32::consts::PI, cosine_hemisphere_pdf(l.z))
+            (
+                w,
+                core::f32::consts::PI / density,
+                cosine_hemisphere_pdf(l.z) * density,
+            )
         }
     };
+    let record = at.guidance.record.filter(|_| cosine);
     if w.dot(p.geometric_normal) <= 0.0 || w.dot(p.shading_normal) <= 0.0 {
+        if let Some(r) = record {
+            r.add(square, 0.0);
+        }
         let path = PathSample {
             rays,
             ..Default::default()
@@ -293,7 +322,11 @@ pub fn hemisphere_sample(
     }
     let mut path = scene.incident_radiance(origin, w, Some(pdf), rng, options, at.gather);
     path.rays += rays;
-    (x + path.radiance * weight, path)
+    let carried = path.radiance * weight;
+    if let Some(r) = record {
+        r.add(square, luminance(carried));
+    }
+    (x + carried, path)
 }
 
 /// Draws samples of E at `p` until C ≤ `settings.max_rel_error` (checked after every
@@ -316,25 +349,14 @@ pub fn hemisphere_sample(
 /// then means that nothing the point sees is lit (a light-tight interior, a sealed void),
 /// and stops at `min_samples` too.
 ///
-/// With `gather`, paths end at their first hit with the lookup's irradiance there (final
+/// `at` holds the point, the origin of its rays, the gathering lookup and the guidance.
+/// With a lookup, paths end at their first hit with its irradiance there (final
 /// gathering, see [`IrradianceLookup`]); without, they are traced to the end.
-pub fn estimate(
-    scene: &TracedScene,
-    p: &SurfacePoint,
-    origin: Vec3,
-    settings: &EstimatorSettings,
-    seed: u64,
-    key: u64,
-    gather: Option<&dyn IrradianceLookup>,
-) -> Estimate {
+pub fn estimate(at: &PointInScene, settings: &EstimatorSettings, seed: u64, key: u64) -> Estimate {
     let mut punctual_rays = 0;
-    let punctual = scene.punctual_irradiance_from(p, origin, &mut punctual_rays);
-    let at = PointInScene {
-        scene,
-        point: *p,
-        origin,
-        gather,
-    };
+    let punctual = at
+        .scene
+        .punctual_irradiance_from(&at.point, at.origin, &mut punctual_rays);
     let mut e = sample_adaptively(
         settings,
         seed,
@@ -344,13 +366,13 @@ pub fn estimate(
         settings.min_samples,
         // Direct light alone, or one bounce gathered from a cache: every sample meets
         // the cache or the lights, so an all-zero run is a dark point, not missed light.
-        if gather.is_some() || settings.max_bounces == Some(0) {
+        if at.gather.is_some() || settings.max_bounces == Some(0) {
             0.0
         } else {
             settings.floor as f64 / FLOOR_FRACTION as f64
         },
         |root, rng| {
-            let (x, path) = hemisphere_sample(&at, settings, root, rng, None);
+            let (x, path) = hemisphere_sample(at, settings, root, rng, None);
             (x, path.first_hit, path.rays)
         },
     );
@@ -358,14 +380,50 @@ pub fn estimate(
     e
 }
 
-/// A point as one scene sees it: where it is, where its rays leave from, and the
-/// gathering lookup of that scene's previous pass (if any).
+/// A point as one scene sees it: where it is, where its rays leave from, the gathering
+/// lookup of that scene's previous pass (if any), and the guide its directions follow.
 #[derive(Clone, Copy)]
 pub struct PointInScene<'a> {
     pub scene: &'a TracedScene,
     pub point: SurfacePoint,
     pub origin: Vec3,
     pub gather: Option<&'a dyn IrradianceLookup>,
+    pub guidance: Guidance<'a>,
+}
+
+impl<'a> PointInScene<'a> {
+    /// `point` of `scene` with rays leaving from `origin`, paths traced to their end,
+    /// plain cosine-weighted directions.
+    pub fn new(scene: &'a TracedScene, point: SurfacePoint, origin: Vec3) -> Self {
+        Self {
+            scene,
+            point,
+            origin,
+            gather: None,
+            guidance: Guidance::default(),
+        }
+    }
+
+    /// Ends every path at its first hit with `gather`'s irradiance there (final gathering).
+    pub fn with_gather(mut self, gather: Option<&'a dyn IrradianceLookup>) -> Self {
+        self.gather = gather;
+        self
+    }
+
+    /// Draws and records directions as `guidance` says.
+    pub fn with_guidance(mut self, guidance: Guidance<'a>) -> Self {
+        self.guidance = guidance;
+        self
+    }
+}
+
+/// How an estimate learns and follows where its light comes from (docs/design.md,
+/// Guiding): a guide to draw cosine-weighted directions through, and a record the light
+/// of its samples goes into for later guides. Either may be absent.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Guidance<'a> {
+    pub guide: Option<&'a DirectionGuide>,
+    pub record: Option<&'a GuideRecord>,
 }
 
 /// The least number of sample pairs of [`estimate_change`].
@@ -467,9 +525,7 @@ pub fn estimate_change(
     } else {
         let projected = probe.samples as f32 * (probe.rel_error / bound).powi(2);
         let (mut e, fresh) = if projected > CHANGE_FALLBACK_FACTOR * settings.min_samples as f32 {
-            let e = estimate(
-                new.scene, &new.point, new.origin, settings, seed, key, new.gather,
-            );
+            let e = estimate(new, settings, seed, key);
             (e, true)
         } else {
             (change(settings.max_samples), false)
@@ -674,7 +730,12 @@ pub fn reference_irradiance(
         .map(|(i, q)| {
             let p = scene.locate(q.position, q.normal)?;
             let origin = scene.spawn_origin(&p);
-            let e = estimate(scene, &p, origin, settings, seed, i as u64, None);
+            let e = estimate(
+                &PointInScene::new(scene, p, origin),
+                settings,
+                seed,
+                i as u64,
+            );
             progress();
             Some(e)
         })

@@ -10,6 +10,8 @@
 //! - [`light_sampling`]: emitters and environment map for next-event estimation.
 //! - [`irradiance`]: Monte Carlo irradiance E(x, ν) with selectable samplers and the
 //!   adaptive relative-error stopping rule.
+//! - [`guiding`]: densities over the hemisphere learned from earlier samples, which the
+//!   estimator draws directions from.
 //!
 //! ```
 //! use surfcache_core::{glam::Vec3, scenes};
@@ -21,6 +23,7 @@
 //! ```
 
 pub mod bvh;
+pub mod guiding;
 pub mod irradiance;
 pub mod light_sampling;
 pub mod path_tracer;
@@ -28,8 +31,8 @@ pub mod traced_scene;
 
 pub use bvh::{Bvh, Hit, SimdLevel};
 pub use irradiance::{
-    BURIED_PROBE_SAMPLES, Estimate, EstimatorSettings, FLOOR_FRACTION, PointInScene, Query,
-    Sampler, ZERO_RUN_EVENTS, estimate, estimate_change, reference_irradiance, unchanged,
+    BURIED_PROBE_SAMPLES, Estimate, EstimatorSettings, FLOOR_FRACTION, Guidance, PointInScene,
+    Query, Sampler, ZERO_RUN_EVENTS, estimate, estimate_change, reference_irradiance, unchanged,
     zero_run_std_error,
 };
 pub use light_sampling::LightSampler;

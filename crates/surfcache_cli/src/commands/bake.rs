@@ -88,6 +88,10 @@ pub struct BakeArgs {
     /// [default: 1].
     #[arg(long)]
     filter_passes: Option<u32>,
+    /// Lightmaps: draw every texel's directions cosine-weighted instead of through the
+    /// guide its block learnt in the first round (docs/design.md, Guiding).
+    #[arg(long)]
+    no_guiding: bool,
     /// Output directory (created; replaced if it holds an earlier bake).
     #[arg(short = 'o', long = "out")]
     out: PathBuf,
@@ -119,6 +123,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         both_sides,
         share_corners: !args.no_share_corners,
         filter_passes: args.filter_passes,
+        guiding: !args.no_guiding,
     };
     let settings = options.settings()?;
     let (min_samples, max_samples) = (

@@ -1,8 +1,10 @@
 //! `surfcache chart`: speed against accuracy (docs/design.md, Speed against accuracy). Bakes every method × sampler
 //! over a sweep of error bounds, in process through the same bake path as `surfcache bake`,
-//! measures each bake's time, cache bytes and sample points, and its relative RMS error
-//! against a converged reference at a fixed point set (the figure `surfcache compare`
-//! reports), then writes `speed_accuracy.csv`, two log-log charts and a summary.
+//! measures each bake's time, cache bytes and sample points, and its per-point relative
+//! error against a converged reference at a fixed point set (relative RMS, median and
+//! 90th percentile, the figures `surfcache compare` reports), then writes
+//! `speed_accuracy.csv`, two log-log charts and a summary. Each scene's panel plots the
+//! measure that says most about it ([`panel_measure`]).
 
 use crate::{
     baking::{self, BakeOptions, parse_method, parse_sampler},
@@ -24,7 +26,46 @@ mod plot;
 mod summary;
 
 /// The CSV header of `speed_accuracy.csv`.
-pub const CSV_HEADER: &str = "scene,method,sampler,bound,seconds,rel_rms,bytes,sample_points";
+pub const CSV_HEADER: &str =
+    "scene,method,sampler,bound,seconds,rel_rms,bytes,sample_points,median_rel,p90_rel";
+
+/// The header of CSVs written before the median and 90th percentile were kept (read
+/// with those two unknown).
+const CSV_HEADER_RMS_ONLY: &str = "scene,method,sampler,bound,seconds,rel_rms,bytes,sample_points";
+
+/// The per-point error a panel of the charts plots.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ErrorMeasure {
+    RelRms,
+    Median,
+}
+
+impl ErrorMeasure {
+    /// The measure's value in a measured row (NaN where the CSV did not keep it).
+    pub fn of(self, m: &Measured) -> f64 {
+        match self {
+            ErrorMeasure::RelRms => m.rel_rms,
+            ErrorMeasure::Median => m.median_rel,
+        }
+    }
+
+    /// Axis title.
+    pub fn describe(self) -> &'static str {
+        match self {
+            ErrorMeasure::RelRms => "relative RMS error (log)",
+            ErrorMeasure::Median => "median per-point relative error (log)",
+        }
+    }
+}
+
+/// What a scene's panel plots: on a level (Sponza) the median per-point error, which
+/// a few contact spots cannot decide; on the Cornell box the relative RMS, as before.
+pub fn panel_measure(scene: &str) -> ErrorMeasure {
+    match scene {
+        "sponza" => ErrorMeasure::Median,
+        _ => ErrorMeasure::RelRms,
+    }
+}
 
 #[derive(clap::Args)]
 pub struct ChartArgs {
@@ -63,7 +104,7 @@ pub struct ChartArgs {
     #[arg(long, default_value = "../shared/assets")]
     shared_assets: PathBuf,
     /// The repository's assets folder (cornell_points.csv, cornell_reference.csv,
-    /// reference/sponza_points.csv, reference/sponza_reference.csv).
+    /// reference/sponza_visible_points.csv, reference/sponza_visible_immenstadter.csv).
     #[arg(long, default_value = "assets")]
     assets: PathBuf,
     /// A bake still running after this many seconds is abandoned, and the tighter bounds
@@ -112,15 +153,10 @@ pub struct SceneSpec {
     max_seconds: f64,
 }
 
-/// The HDR map Sponza is lit by (in the shared assets' `envmaps/`).
-pub const SPONZA_ENV: &str = "st_fagans_interior_1k.exr";
-
-/// Sponza's bake settings: what keeps one bake of its 262k triangles to minutes on two
-/// cores (docs/results.md).
-pub const SPONZA_IRRADIANCE_MAP_DENSITY: f32 = 1.0;
-pub const SPONZA_LIGHTMAP_DENSITY: f32 = 1.0;
-pub const SPONZA_MIN_SAMPLES: u32 = 16;
-pub const SPONZA_MAX_SAMPLES: u32 = 256;
+/// The HDR map Sponza is lit by (in the shared assets' `envmaps/`): the sunny sky its
+/// reference was path-traced under (docs/results.md, "Sponza at the defaults: the
+/// reference").
+pub const SPONZA_ENV: &str = "immenstadter_horn_1k.exr";
 
 fn scene_spec(name: &str, args: &ChartArgs) -> Result<Option<SceneSpec>> {
     match name {
@@ -156,14 +192,17 @@ fn scene_spec(name: &str, args: &ChartArgs) -> Result<Option<SceneSpec>> {
                     env: Some(env),
                     ..Default::default()
                 },
-                points: args.assets.join("reference/sponza_points.csv"),
-                reference: args.assets.join("reference/sponza_reference.csv"),
-                irradiance_map_density: Some(SPONZA_IRRADIANCE_MAP_DENSITY),
-                lightmap_density: Some(SPONZA_LIGHTMAP_DENSITY),
-                min_samples: Some(SPONZA_MIN_SAMPLES),
-                max_samples: Some(SPONZA_MAX_SAMPLES),
-                gather: 0,
-                both_sides: false,
+                points: args.assets.join("reference/sponza_visible_points.csv"),
+                reference: args
+                    .assets
+                    .join("reference/sponza_visible_immenstadter.csv"),
+                // Every setting as `surfcache bake` has it by default.
+                irradiance_map_density: None,
+                lightmap_density: None,
+                min_samples: None,
+                max_samples: None,
+                gather: surfcache_cache::bake::DEFAULT_GATHER_PASSES,
+                both_sides: true,
                 max_seconds: args.sponza_max_seconds,
             }))
         }
@@ -192,24 +231,39 @@ pub struct Measured {
     pub rel_rms: f64,
     pub bytes: u64,
     pub sample_points: u64,
+    /// Median and 90th percentile of the per-point relative error (NaN in rows of older
+    /// CSVs that did not keep them).
+    pub median_rel: f64,
+    pub p90_rel: f64,
 }
 
 impl Row {
     fn csv(&self) -> String {
         match &self.measured {
-            Some(m) => format!(
-                "{},{},{},{},{:.3},{:.6},{},{}",
-                self.scene,
-                self.method,
-                self.sampler,
-                self.bound,
-                self.seconds,
-                m.rel_rms,
-                m.bytes,
-                m.sample_points
-            ),
+            Some(m) => {
+                let optional = |v: f64| {
+                    if v.is_finite() {
+                        format!("{v:.6}")
+                    } else {
+                        String::new()
+                    }
+                };
+                format!(
+                    "{},{},{},{},{:.3},{:.6},{},{},{},{}",
+                    self.scene,
+                    self.method,
+                    self.sampler,
+                    self.bound,
+                    self.seconds,
+                    m.rel_rms,
+                    m.bytes,
+                    m.sample_points,
+                    optional(m.median_rel),
+                    optional(m.p90_rel)
+                )
+            }
             None => format!(
-                "{},{},{},{},{:.3},,,",
+                "{},{},{},{},{:.3},,,,,",
                 self.scene, self.method, self.sampler, self.bound, self.seconds
             ),
         }
@@ -217,7 +271,7 @@ impl Row {
 }
 
 /// Writes the rows as `speed_accuracy.csv` (skipped points: empty error, bytes and
-/// sample-point fields).
+/// sample-point fields; a median or percentile not known: empty).
 fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
     let mut text = String::from(CSV_HEADER);
     text.push('\n');
@@ -228,21 +282,30 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
     Ok(surfcache_io::write_file_atomically(path, text.as_bytes())?)
 }
 
-/// Reads what [`write_csv`] wrote.
+/// Reads what [`write_csv`] wrote (or a CSV of the older header without the median
+/// and 90th percentile).
 pub fn read_csv(path: &Path) -> Result<Vec<Row>> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read '{}'", path.display()))?;
     let mut lines = text.lines();
-    if lines.next().map(str::trim) != Some(CSV_HEADER) {
-        bail!("'{}': header must be '{CSV_HEADER}'", path.display());
-    }
+    let fields = match lines.next().map(str::trim) {
+        Some(CSV_HEADER) => 10,
+        Some(CSV_HEADER_RMS_ONLY) => 8,
+        _ => bail!("'{}': header must be '{CSV_HEADER}'", path.display()),
+    };
     let mut rows = Vec::new();
     for (i, line) in lines.enumerate().filter(|(_, l)| !l.trim().is_empty()) {
         let f: Vec<&str> = line.split(',').map(str::trim).collect();
         let bad = || anyhow::anyhow!("'{}' line {}: malformed row", path.display(), i + 2);
-        if f.len() != 8 {
+        if f.len() != fields {
             return Err(bad());
         }
+        let optional = |k: usize| -> Result<f64> {
+            match f.get(k) {
+                None | Some(&"") => Ok(f64::NAN),
+                Some(v) => v.parse().map_err(|_| bad()),
+            }
+        };
         let measured = if f[5].is_empty() {
             None
         } else {
@@ -250,6 +313,8 @@ pub fn read_csv(path: &Path) -> Result<Vec<Row>> {
                 rel_rms: f[5].parse().map_err(|_| bad())?,
                 bytes: f[6].parse().map_err(|_| bad())?,
                 sample_points: f[7].parse().map_err(|_| bad())?,
+                median_rel: optional(8)?,
+                p90_rel: optional(9)?,
             })
         };
         rows.push(Row {
@@ -461,6 +526,7 @@ pub fn run(args: ChartArgs) -> Result<()> {
                         both_sides: spec.both_sides,
                         share_corners: true,
                         filter_passes: None,
+                        guiding: true,
                     };
                     let elapsed_at_start = sweep_start.elapsed();
                     let reached = std::sync::Mutex::new(JobProgress::default());
@@ -523,14 +589,18 @@ pub fn run(args: ChartArgs) -> Result<()> {
                         rel_rms: c.rel_rms,
                         bytes: stats.cache_bytes,
                         sample_points: stats.sample_points,
+                        median_rel: c.median_rel,
+                        p90_rel: c.p90_rel,
                     });
                     eprintln!(
-                        "chart: {} {} {} bound {bound}: {:.1} s, rel_rms {:.4}, {} bytes, {} sample points",
+                        "chart: {} {} {} bound {bound}: {:.1} s, rel_rms {:.4}, median {:.4}, p90 {:.4}, {} bytes, {} sample points",
                         spec.name,
                         method.name(),
                         sampler.name(),
                         baked.seconds,
                         c.rel_rms,
+                        c.median_rel,
+                        c.p90_rel,
                         stats.cache_bytes,
                         stats.sample_points
                     );

@@ -26,6 +26,13 @@ pub struct PointsArgs {
     /// viewpoint. `--side` is then ignored.
     #[arg(long)]
     visible: bool,
+    /// Instead of sampling points, reads POINTS.csv (x,y,z,nx,ny,nz) and writes each point
+    /// with its *sky view*: the share of cosine-weighted directions about its normal that
+    /// meet no surface (1024 stratified rays), as x,y,z,nx,ny,nz,sky. Levels report their
+    /// open-sky points (sky view 1: roofs, outer walls) apart from the rest
+    /// (docs/results.md).
+    #[arg(long, value_name = "POINTS.csv", conflicts_with = "visible")]
+    sky_view: Option<PathBuf>,
     /// Output CSV x,y,z,nx,ny,nz [default: stdout].
     #[arg(short = 'o', long = "out")]
     output: Option<PathBuf>,
@@ -34,6 +41,18 @@ pub struct PointsArgs {
 pub fn run(args: PointsArgs) -> Result<()> {
     let loaded = LoadedWorld::load(&args.scene, &EnvArgs::default())?;
     let scene = loaded.traced()?;
+    if let Some(path) = &args.sky_view {
+        let queries = crate::points::read_points(path)?;
+        let rows: Vec<String> = queries
+            .iter()
+            .map(|q| {
+                let (x, n) = (q.position, q.normal);
+                let sky = sky_view(&scene, x, n).map_or("nan".to_string(), |s| s.to_string());
+                format!("{},{},{},{},{},{},{sky}", x.x, x.y, x.z, n.x, n.y, n.z)
+            })
+            .collect();
+        return crate::points::write_results(args.output.as_deref(), "x,y,z,nx,ny,nz,sky", &rows);
+    }
     if args.visible {
         let rows: Vec<String> = visible_points(&scene, args.count, args.seed)?
             .into_iter()
@@ -58,6 +77,32 @@ pub fn run(args: PointsArgs) -> Result<()> {
         rows.push(format!("{},{},{},{},{},{}", x.x, x.y, x.z, n.x, n.y, n.z));
     }
     crate::points::write_results(args.output.as_deref(), "x,y,z,nx,ny,nz", &rows)
+}
+
+/// Stratified cosine-weighted rays per point of [`sky_view`] (32 × 32 cells).
+const SKY_VIEW_SIDE: u32 = 32;
+
+/// The share of cosine-weighted directions about the point's normal that escape to the
+/// sky (one jittered direction per cell of a 32 × 32 grid of the sample square); `None`
+/// for a point on no surface.
+fn sky_view(scene: &surfcache_trace::TracedScene, x: glam::Vec3, n: glam::Vec3) -> Option<f32> {
+    use surfcache_core::{geometry::to_world, sampling::cosine_hemisphere};
+    let p = scene.locate(x, n)?;
+    let origin = scene.spawn_origin(&p);
+    let mut rng = Rng::new(0x5c1e, 0);
+    let mut open = 0u32;
+    for k in 0..SKY_VIEW_SIDE * SKY_VIEW_SIDE {
+        let cell = glam::Vec2::new((k % SKY_VIEW_SIDE) as f32, (k / SKY_VIEW_SIDE) as f32);
+        let w = to_world(
+            cosine_hemisphere((cell + rng.next_vec2()) / SKY_VIEW_SIDE as f32),
+            p.shading_normal,
+        );
+        if w.dot(p.geometric_normal) > 0.0 && scene.closest_hit(origin, w, f32::INFINITY).is_none()
+        {
+            open += 1;
+        }
+    }
+    Some(open as f32 / (SKY_VIEW_SIDE * SKY_VIEW_SIDE) as f32)
 }
 
 /// Rays a candidate viewpoint sends to tell open air from the inside of a solid.

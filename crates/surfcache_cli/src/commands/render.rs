@@ -14,7 +14,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::path::PathBuf;
 use surfcache_cache::SurfaceCache;
-use surfcache_trace::{EstimatorSettings, Hit, Sampler, TracedScene, estimate};
+use surfcache_trace::{EstimatorSettings, Hit, PointInScene, Sampler, TracedScene, estimate};
 
 #[derive(clap::Args)]
 pub struct RenderArgs {
@@ -122,7 +122,13 @@ pub fn run(args: RenderArgs) -> Result<()> {
             (None, Some(settings)) => {
                 let p = scene.hit_point(hit, d);
                 let origin = scene.spawn_origin(&p);
-                estimate(&scene, &p, origin, settings, args.seed, key, None).value
+                estimate(
+                    &PointInScene::new(&scene, p, origin),
+                    settings,
+                    args.seed,
+                    key,
+                )
+                .value
             }
             (None, None) => Vec3::ZERO,
         };

@@ -1,7 +1,7 @@
 //! The two log-log charts of `surfcache chart`: relative RMS error against bake seconds
 //! and against cache bytes, one panel per scene, one curve per (method, sampler).
 
-use super::Row;
+use super::{Row, panel_measure};
 use anyhow::{Context, Result, anyhow};
 use plotters::{
     prelude::*,
@@ -123,6 +123,7 @@ fn draw_panel(
     scene: &str,
     axis: XAxis,
 ) -> std::result::Result<(), Box<dyn std::error::Error>> {
+    let measure = panel_measure(scene);
     let measured: Vec<(&Row, f64, f64)> = rows
         .iter()
         .filter(|r| r.scene == scene)
@@ -132,8 +133,8 @@ fn draw_panel(
                 XAxis::Seconds => r.seconds,
                 XAxis::Bytes => m.bytes as f64,
             };
-            (x > 0.0 && m.rel_rms > 0.0 && x.is_finite() && m.rel_rms.is_finite())
-                .then_some((r, x, m.rel_rms))
+            let y = measure.of(&m);
+            (x > 0.0 && y > 0.0 && x.is_finite() && y.is_finite()).then_some((r, x, y))
         })
         .collect();
     if measured.is_empty() {
@@ -173,7 +174,7 @@ fn draw_panel(
     chart
         .configure_mesh()
         .x_desc(x_desc)
-        .y_desc("relative RMS error (log)")
+        .y_desc(measure.describe())
         .x_labels(12)
         .y_labels(16)
         .label_style(("sans-serif", 15))

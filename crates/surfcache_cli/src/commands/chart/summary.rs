@@ -2,19 +2,21 @@
 //! the tightest one reached), the time ratio of the uniform and best samplers at equal
 //! error, bytes per method at equal error, and what was skipped.
 
-use super::Row;
+use super::{Row, panel_measure};
 use std::fmt::Write as _;
 
-/// One curve's measured points (bound, seconds, rel_rms, bytes), loosest bound first.
+/// One curve's measured points (bound, seconds, error, bytes), loosest bound first; the
+/// error is the one the scene's panel plots ([`panel_measure`]).
 fn curve(rows: &[Row], scene: &str, method: &str, sampler: &str) -> Vec<(f32, f64, f64, f64)> {
+    let measure = panel_measure(scene);
     let mut c: Vec<_> = rows
         .iter()
         .filter(|r| r.scene == scene && r.method == method && r.sampler == sampler)
         .filter_map(|r| {
             let m = r.measured?;
-            Some((r.bound, r.seconds, m.rel_rms, m.bytes as f64))
+            Some((r.bound, r.seconds, measure.of(&m), m.bytes as f64))
         })
-        .filter(|p| p.1 > 0.0 && p.2 > 0.0 && p.3 > 0.0)
+        .filter(|p| p.1 > 0.0 && p.2 > 0.0 && p.3 > 0.0 && p.2.is_finite())
         .collect();
     c.sort_by(|a, b| b.0.total_cmp(&a.0));
     c
@@ -80,6 +82,11 @@ fn pct(v: f64) -> String {
     format!("{:.2} %", 100.0 * v)
 }
 
+/// A percentage, or – where the row did not keep it.
+fn pct_or_dash(v: f64) -> String {
+    if v.is_finite() { pct(v) } else { "–".into() }
+}
+
 fn read_str(r: Read, unit: &str) -> String {
     let d = if unit == " s" { 1 } else { 0 };
     match r {
@@ -103,7 +110,7 @@ pub fn summary(rows: &[Row], settings: &str) -> String {
     let samplers = unique(rows, |r| &r.sampler);
 
     md.push_str("## At the 1 % bound (or the tightest bound reached)\n\n");
-    md.push_str("| scene | method | sampler | bound | seconds | rel_rms | bytes | sample points |\n|---|---|---|---:|---:|---:|---:|---:|\n");
+    md.push_str("| scene | method | sampler | bound | seconds | rel_rms | median | p90 | bytes | sample points |\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
     for scene in &scenes {
         for method in &methods {
             for sampler in &samplers {
@@ -120,10 +127,12 @@ pub fn summary(rows: &[Row], settings: &str) -> String {
                     let m = r.measured.expect("filtered");
                     let _ = writeln!(
                         md,
-                        "| {scene} | {method} | {sampler} | {} | {:.1} | {} | {} | {} |",
+                        "| {scene} | {method} | {sampler} | {} | {:.1} | {} | {} | {} | {} | {} |",
                         r.bound,
                         r.seconds,
                         pct(m.rel_rms),
+                        pct_or_dash(m.median_rel),
+                        pct_or_dash(m.p90_rel),
                         m.bytes,
                         m.sample_points
                     );
@@ -169,7 +178,7 @@ pub fn summary(rows: &[Row], settings: &str) -> String {
     }
 
     md.push_str("\n## Bytes per method at equal error\n\n");
-    md.push_str("Cache bytes each method needs for a given relative RMS error, read along its curve as above (–: never that accurate in this sweep).\n\n");
+    md.push_str("Cache bytes each method needs for a given error (the measure its scene's chart plots), read along its curve as above (–: never that accurate in this sweep).\n\n");
     md.push_str("| scene | sampler | error |");
     for m in &methods {
         let _ = write!(md, " {m} |");
@@ -207,7 +216,7 @@ pub fn summary(rows: &[Row], settings: &str) -> String {
     if skipped.is_empty() {
         md.push_str("Nothing: every bake of the sweep finished.\n");
     } else {
-        md.push_str("These rows of the CSV have empty rel_rms, bytes and sample_points (seconds: time spent before the bake was abandoned, 0 if not started).\n\n");
+        md.push_str("These rows of the CSV have empty rel_rms, bytes, sample_points, median_rel and p90_rel (seconds: time spent before the bake was abandoned, 0 if not started).\n\n");
         for r in skipped {
             let _ = writeln!(
                 md,

@@ -9,15 +9,19 @@
 //!   (conservative rasterisation, [`conservative_texels`]). A texel belongs to one
 //!   triangle: the one containing its centre, else the nearest; it is estimated at the
 //!   centre, or at the closest point of its triangle, nudged inside.
-//! - **One round.** Every owned texel is one [`SampleSite::Surface`] on the front side, and
+//! - **Rounds.** Every owned texel is one [`SampleSite::Surface`] on the front side, and
 //!   on the back side in a second layer when [`LightmapSettings::both_sides`]; texels are
-//!   adaptive through the estimator's stopping rule, not through refinement.
+//!   adaptive through rounds of doubling samples where their filtered error is still above
+//!   the bound, not through refinement. Rounds after the first draw their directions
+//!   through the guide their block of texels learnt ([`guides`]; docs/design.md, Guiding).
 //! - **Buried texels** (estimates whose first rays mostly hit back faces: the texel lies
 //!   inside other geometry) are refilled from valid neighbours, and texels owned by no
 //!   triangle are **dilated** from their neighbours `gutter` times, so that bilinear
 //!   filtering at chart borders never pulls in black.
 //! - **Storage.** Three half floats a texel ([`crate::stored_rgb`]) with one power-of-two
 //!   [`StoreScale`].
+
+mod guides;
 
 use crate::burial::Burial;
 use crate::{
@@ -29,13 +33,14 @@ use crate::{
     stored_rgb::{STORED_RGB_BYTES, StoreScale, StoredRgb},
 };
 use glam::{Vec2, Vec3};
+use guides::TexelGuides;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use surfcache_core::{
     geometry::{closest_point_barycentric, interpolate, triangle_area},
     sampling::splitmix64,
 };
-use surfcache_trace::{Estimate, EstimatorSettings, TracedScene};
+use surfcache_trace::{Estimate, EstimatorSettings, Guidance, TracedScene};
 
 /// How lightmaps are laid out and which texels are trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -65,6 +70,15 @@ pub struct LightmapSettings {
     /// the bake plans rounds ([`SurfaceCache::plan_sampling`]).
     #[serde(default)]
     pub filter: FilterSettings,
+    /// Texels that need more than the first round draw their directions through a guide
+    /// learnt from the first round of their block ([`guides`]; docs/design.md, Guiding).
+    /// Default true.
+    #[serde(default = "guiding_default")]
+    pub guiding: bool,
+}
+
+fn guiding_default() -> bool {
+    true
 }
 
 impl Default for LightmapSettings {
@@ -76,6 +90,7 @@ impl Default for LightmapSettings {
             both_sides: true,
             buried_threshold: 0.5,
             filter: FilterSettings::default(),
+            guiding: true,
         }
     }
 }
@@ -183,6 +198,9 @@ pub struct Lightmaps {
     /// Hemisphere samples the feet took (counted in the statistics).
     #[serde(skip)]
     foot_samples: u64,
+    /// While baking: every round's records and the guides of the next round.
+    #[serde(skip)]
+    guides: TexelGuides,
     emitted: bool,
     /// Stored texels of all layers.
     packed: Vec<StoredRgb>,
@@ -270,6 +288,7 @@ impl Lightmaps {
             feet: Vec::new(),
             foot_lines: Vec::new(),
             foot_samples: 0,
+            guides: TexelGuides::default(),
             emitted: false,
             packed: vec![[0; 3]; layers * layer_texels],
             sample_counts: Vec::new(),
@@ -630,6 +649,7 @@ impl Lightmaps {
         self.exits = Vec::new();
         self.foot_sites = Vec::new();
         self.feet = Vec::new();
+        self.guides = TexelGuides::default();
     }
 
     /// Probes every owned slot for crossings near its texel ([`crossings::probe`], as far
@@ -1135,6 +1155,11 @@ impl SurfaceCache for Lightmaps {
             Some(plan) if self.priors.is_empty() => Some(plan.first),
             _ => None,
         };
+        if let Some(plan) = self.plan.filter(|p| {
+            self.settings.guiding && self.priors.is_empty() && p.bound > 0.0 && p.max > p.first
+        }) {
+            self.guides = TexelGuides::recording(&self.maps, &self.owner, self.layers, plan.floor);
+        }
         self.probe_crossings(scene);
         for layer in 0..self.layers {
             for m in &self.maps {
@@ -1178,6 +1203,18 @@ impl SurfaceCache for Lightmaps {
 
     fn later_samples(&self) -> Option<u64> {
         Some(self.later_samples)
+    }
+
+    /// Every round records into its texels' blocks; rounds after the first draw through
+    /// their blocks' guides ([`guides`]). Feet do neither.
+    fn guidance(&self, i: usize) -> Guidance<'_> {
+        match self.slots.get(i) {
+            Some(&slot) => Guidance {
+                record: self.guides.record(slot as usize),
+                guide: self.guides.guide(slot as usize),
+            },
+            None => Guidance::default(),
+        }
     }
 
     /// Merges the round's estimates into their texels, marks buried ones (first round),
@@ -1254,6 +1291,8 @@ impl SurfaceCache for Lightmaps {
                 }
             }
         }
+        self.guides
+            .learn(self.pending.iter().map(|&(slot, _)| slot as usize));
         if self.pending.is_empty() {
             self.emitted = true;
             self.finish(

@@ -1,0 +1,295 @@
+//! Guided hemisphere sampling stays unbiased whatever the guide (docs/design.md, Guiding):
+//! closed forms reached with guides that point at the light, away from it, or nowhere
+//! in particular, and a lightmap of a room lit only through a hole in its ceiling (the
+//! case guides are for) against Lambert's polygon formula.
+
+mod common;
+
+use surfcache::cache::{CacheSettings, lightmap::LightmapSettings};
+use surfcache::core::{
+    Environment, EnvironmentMap, Instance, Material, Scene,
+    glam::{Vec2, Vec3},
+    sampling::Rng,
+    scenes::{cuboid, quad},
+};
+use surfcache::trace::{
+    EstimatorSettings, Guidance, PointInScene, Sampler, TracedScene, estimate,
+    guiding::{DirectionGuide, GuideRecord},
+};
+
+/// A guide that believes all light comes through the square cells around `centre`.
+fn guide_towards(centre: Vec2) -> DirectionGuide {
+    let record = GuideRecord::new(1.0);
+    let mut rng = Rng::new(1, 2);
+    for _ in 0..4096 {
+        let u = rng.next_vec2();
+        let v = if (u - centre).length() < 0.2 {
+            50.0
+        } else {
+            0.0
+        };
+        record.add(u, v);
+    }
+    DirectionGuide::from_record(&record).unwrap()
+}
+
+fn guides() -> Vec<(&'static str, DirectionGuide)> {
+    vec![
+        ("corner", guide_towards(Vec2::new(0.05, 0.05))),
+        ("centre", guide_towards(Vec2::splat(0.5))),
+        ("edge", guide_towards(Vec2::new(0.95, 0.5))),
+    ]
+}
+
+/// E at `position` (facing `normal`) with `guide`, `samples` samples: value and standard
+/// error per channel.
+fn guided(
+    scene: &TracedScene,
+    position: Vec3,
+    normal: Vec3,
+    guide: Option<&DirectionGuide>,
+    sampler: Sampler,
+    samples: u32,
+) -> (Vec3, Vec3) {
+    let p = scene.locate(position, normal).expect("on a surface");
+    let at = PointInScene::new(scene, p, scene.spawn_origin(&p)).with_guidance(Guidance {
+        guide,
+        record: None,
+    });
+    let e = estimate(
+        &at,
+        &EstimatorSettings::fixed(sampler, samples, None),
+        3,
+        11,
+    );
+    (e.value, e.std_error)
+}
+
+fn assert_close((e, se): (Vec3, Vec3), expected: Vec3, what: &str) {
+    for c in 0..3 {
+        let tol = 4.0 * se[c] + 1e-4 * expected[c].abs() + 1e-6;
+        assert!(
+            (e[c] - expected[c]).abs() <= tol,
+            "{what}: channel {c}: got {} ± {}, expected {}",
+            e[c],
+            se[c],
+            expected[c]
+        );
+    }
+}
+
+fn floor(h: f32) -> Instance {
+    let v = Vec3::new;
+    Instance::new(
+        quad(
+            "floor",
+            [v(-h, 0., -h), v(h, 0., -h), v(h, 0., h), v(-h, 0., h)],
+            Vec3::Y,
+        ),
+        Material::diffuse("floor", Vec3::splat(0.5)),
+    )
+}
+
+#[test]
+fn plane_under_uniform_sky_receives_pi_l_whatever_the_guide() {
+    let l = Vec3::new(0.5, 1.0, 2.0);
+    let scene = TracedScene::new(&Scene {
+        instances: vec![floor(10.0)],
+        environment: Environment::uniform(l),
+        ..Default::default()
+    })
+    .unwrap();
+    for (name, g) in guides() {
+        for sampler in [Sampler::Cosine, Sampler::Qmc, Sampler::Mis, Sampler::Best] {
+            let r = guided(&scene, Vec3::ZERO, Vec3::Y, Some(&g), sampler, 8192);
+            assert_close(r, std::f32::consts::PI * l, &format!("{name} {sampler:?}"));
+        }
+    }
+}
+
+#[test]
+fn furnace_box_matches_geometric_series_whatever_the_guide() {
+    // Closed box whose inner walls emit Le with albedo ρ: E = π Le / (1 − ρ).
+    let (le, rho) = (Vec3::new(1.0, 2.0, 0.5), 0.6);
+    let mut wall = Material::emissive("wall", Vec3::splat(rho), le);
+    wall.double_sided = false;
+    let scene = TracedScene::new(&Scene {
+        instances: vec![Instance::new(
+            cuboid("box", Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0), true),
+            wall,
+        )],
+        ..Default::default()
+    })
+    .unwrap();
+    let expected = std::f32::consts::PI * le / (1.0 - rho);
+    for (name, g) in guides() {
+        for sampler in [Sampler::Cosine, Sampler::Best] {
+            let r = guided(
+                &scene,
+                Vec3::new(0.5, 0.0, 1.5),
+                Vec3::Y,
+                Some(&g),
+                sampler,
+                40_000,
+            );
+            assert_close(r, expected, &format!("furnace {name} {sampler:?}"));
+        }
+    }
+}
+
+#[test]
+fn sun_and_sky_map_agrees_with_and_without_guides() {
+    // A sky of radiance 1 with a sun 2,000 times as bright in a few pixels, over a plane
+    // with a wall beside it: guided and plain estimates of the same point agree.
+    let sun = Vec3::new(0.5, 0.6, 0.3).normalize();
+    let map = EnvironmentMap::from_fn(64, 32, |d| {
+        if d.dot(sun) > 0.995 {
+            Vec3::splat(2000.0)
+        } else {
+            Vec3::ONE
+        }
+    });
+    let v = Vec3::new;
+    let wall = Instance::new(
+        quad(
+            "wall",
+            [v(1., 0., -5.), v(1., 3., -5.), v(1., 3., 5.), v(1., 0., 5.)],
+            Vec3::NEG_X,
+        ),
+        Material::diffuse("wall", Vec3::splat(0.7)),
+    );
+    let scene = TracedScene::new(&Scene {
+        instances: vec![floor(10.0), wall],
+        environment: Environment::from_map(std::sync::Arc::new(map)),
+        ..Default::default()
+    })
+    .unwrap();
+    let plain = guided(&scene, Vec3::ZERO, Vec3::Y, None, Sampler::Best, 200_000);
+    for (name, g) in guides() {
+        let r = guided(
+            &scene,
+            Vec3::ZERO,
+            Vec3::Y,
+            Some(&g),
+            Sampler::Best,
+            200_000,
+        );
+        let se = (r.1 * r.1 + plain.1 * plain.1).map(f32::sqrt);
+        assert_close((r.0, se), plain.0, &format!("sun and sky, {name}"));
+    }
+}
+
+#[test]
+fn room_lit_through_a_ceiling_hole_matches_lamberts_formula() {
+    // A black 2 × 1 × 2 m room whose ceiling has a 0.5 m square hole above (0.5, 1, 0.5),
+    // under a uniform sky: the floor sees the sky through the hole only, E = the
+    // hole's polygon irradiance. Most texels get their light from a small part of their
+    // hemisphere, so their later rounds are guided.
+    let v = Vec3::new;
+    let black = || common::grey(0.0);
+    let rect = |name: &str, c: [Vec3; 4], n: Vec3| common::instance(quad(name, c, n), black());
+    let (lo, hi) = (0.25, 0.75);
+    let instances = vec![
+        rect(
+            "floor",
+            [
+                v(-1., 0., -1.),
+                v(1., 0., -1.),
+                v(1., 0., 1.),
+                v(-1., 0., 1.),
+            ],
+            Vec3::Y,
+        ),
+        rect(
+            "x-",
+            [
+                v(-1., 0., -1.),
+                v(-1., 0., 1.),
+                v(-1., 1., 1.),
+                v(-1., 1., -1.),
+            ],
+            Vec3::X,
+        ),
+        rect(
+            "x+",
+            [v(1., 0., -1.), v(1., 1., -1.), v(1., 1., 1.), v(1., 0., 1.)],
+            Vec3::NEG_X,
+        ),
+        rect(
+            "z-",
+            [
+                v(-1., 0., -1.),
+                v(-1., 1., -1.),
+                v(1., 1., -1.),
+                v(1., 0., -1.),
+            ],
+            Vec3::Z,
+        ),
+        rect(
+            "z+",
+            [v(-1., 0., 1.), v(1., 0., 1.), v(1., 1., 1.), v(-1., 1., 1.)],
+            Vec3::NEG_Z,
+        ),
+        // The ceiling around the hole: four slabs.
+        rect(
+            "c1",
+            [
+                v(-1., 1., -1.),
+                v(-1., 1., 1.),
+                v(lo, 1., 1.),
+                v(lo, 1., -1.),
+            ],
+            Vec3::NEG_Y,
+        ),
+        rect(
+            "c2",
+            [v(hi, 1., -1.), v(hi, 1., 1.), v(1., 1., 1.), v(1., 1., -1.)],
+            Vec3::NEG_Y,
+        ),
+        rect(
+            "c3",
+            [v(lo, 1., -1.), v(lo, 1., lo), v(hi, 1., lo), v(hi, 1., -1.)],
+            Vec3::NEG_Y,
+        ),
+        rect(
+            "c4",
+            [v(lo, 1., hi), v(lo, 1., 1.), v(hi, 1., 1.), v(hi, 1., hi)],
+            Vec3::NEG_Y,
+        ),
+    ];
+    let sky = 2.0;
+    let scene = common::traced(instances, Environment::uniform(Vec3::splat(sky)));
+    let settings = CacheSettings::Lightmap(LightmapSettings {
+        texels_per_metre: 16.0,
+        ..Default::default()
+    });
+    let rel = 0.02;
+    let (cache, floor) = common::bake(&scene, settings, common::estimator_with(rel, 64, 4096, 0.0));
+    let hole = [v(lo, 1., lo), v(hi, 1., lo), v(hi, 1., hi), v(lo, 1., hi)];
+    let mut points = common::Points(0x5eed);
+    for k in 0..60 {
+        // Points on the floor away from the walls (bilinear lookups blend texels within
+        // one texel of a point: E changes little over that distance here).
+        let x = v(
+            -0.8 + 1.6 * points.next_f32(),
+            0.0,
+            -0.8 + 1.6 * points.next_f32(),
+        );
+        let expected = common::polygon_irradiance(x, Vec3::Y, &hole, sky);
+        let got = common::lookup(cache.as_ref(), &scene, x, Vec3::Y);
+        // Texel resolution: E at the texel centres around x differs from E at x by at
+        // most its change over one texel diagonal (measured from the closed form).
+        let texel = 1.0 / 16.0;
+        let spread = [v(texel, 0., texel), v(texel, 0., -texel)]
+            .iter()
+            .flat_map(|d| [x + *d, x - *d])
+            .map(|y| (common::polygon_irradiance(y, Vec3::Y, &hole, sky) - expected).abs())
+            .fold(0.0f32, f32::max);
+        let tol = 4.0 * rel * (expected + floor) + spread + 1e-4;
+        assert!(
+            (got.x - expected).abs() <= tol,
+            "floor point {k} at {x}: got {}, expected {expected} (tolerance {tol})",
+            got.x
+        );
+    }
+}
