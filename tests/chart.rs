@@ -77,16 +77,7 @@ fn tiny_sweep_writes_csv_charts_and_summary() {
     );
 
     // Redrawing from the CSV alone keeps it as it is.
-    let replot = Command::new(SURFCACHE)
-        .args(["chart", "--replot", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        replot.status.success(),
-        "{}",
-        String::from_utf8_lossy(&replot.stderr)
-    );
+    replot(&out);
     assert_eq!(
         std::fs::read_to_string(out.join("speed_accuracy.csv")).unwrap(),
         csv
@@ -106,16 +97,7 @@ fn replot_reads_csvs_written_before_the_median_was_kept() {
          cornell,vertex,best,0.01,0.000,,,\n",
     )
     .unwrap();
-    let replot = Command::new(SURFCACHE)
-        .args(["chart", "--replot", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        replot.status.success(),
-        "{}",
-        String::from_utf8_lossy(&replot.stderr)
-    );
+    replot(&out);
     let csv = std::fs::read_to_string(out.join("speed_accuracy.csv")).unwrap();
     assert_eq!(
         csv,
@@ -126,4 +108,18 @@ fn replot_reads_csvs_written_before_the_median_was_kept() {
     );
     let summary = std::fs::read_to_string(out.join("speed_accuracy.md")).unwrap();
     assert!(summary.contains("| 1.00 % | – | – |"), "{summary}");
+}
+
+/// `surfcache chart --replot --out OUT`, which must succeed.
+fn replot(out: &Path) {
+    let run = Command::new(SURFCACHE)
+        .args(["chart", "--replot", "--out"])
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
 }

@@ -65,17 +65,10 @@ fn guided(
     (e.value, e.std_error)
 }
 
-fn assert_close((e, se): (Vec3, Vec3), expected: Vec3, what: &str) {
-    for c in 0..3 {
-        let tol = 4.0 * se[c] + 1e-4 * expected[c].abs() + 1e-6;
-        assert!(
-            (e[c] - expected[c]).abs() <= tol,
-            "{what}: channel {c}: got {} ± {}, expected {}",
-            e[c],
-            se[c],
-            expected[c]
-        );
-    }
+/// Within four standard errors (plus rounding) in every channel.
+#[track_caller]
+fn assert_close(got: (Vec3, Vec3), expected: Vec3, what: &str) {
+    common::assert_within_errors(got, expected, 4.0, what);
 }
 
 fn floor(h: f32) -> Instance {

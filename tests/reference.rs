@@ -3,6 +3,8 @@
 //! Each scene has an exact answer; the estimate must lie within 3 standard errors of it
 //! (plus a float-precision allowance where the estimator has no variance at all).
 
+mod common;
+
 use surfcache::core::EnvironmentMap;
 use surfcache::core::{
     Environment, Instance, Light, Material, Scene,
@@ -52,18 +54,9 @@ fn reference_bounded(
 }
 
 /// |E − expected| ≤ 3 se + 1e-4 expected + 1e-6 in every channel.
+#[track_caller]
 fn assert_close(got: (Vec3, Vec3), expected: Vec3, what: &str) {
-    let (e, se) = got;
-    for c in 0..3 {
-        let tol = 3.0 * se[c] + 1e-4 * expected[c].abs() + 1e-6;
-        assert!(
-            (e[c] - expected[c]).abs() <= tol,
-            "{what}: channel {c}: got {} ± {}, expected {}",
-            e[c],
-            se[c],
-            expected[c]
-        );
-    }
+    common::assert_within_errors(got, expected, 3.0, what);
 }
 
 #[test]

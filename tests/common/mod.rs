@@ -102,6 +102,23 @@ impl Points {
     }
 }
 
+/// |E − expected| ≤ `sigmas` · se + 1e-4 · expected + 1e-6 in every channel, for an
+/// estimate `got` = (E, its standard error se).
+#[track_caller]
+pub fn assert_within_errors(got: (Vec3, Vec3), expected: Vec3, sigmas: f32, what: &str) {
+    let (e, se) = got;
+    for c in 0..3 {
+        let tol = sigmas * se[c] + 1e-4 * expected[c].abs() + 1e-6;
+        assert!(
+            (e[c] - expected[c]).abs() <= tol,
+            "{what}: channel {c}: got {} ± {}, expected {}",
+            e[c],
+            se[c],
+            expected[c]
+        );
+    }
+}
+
 /// `got` is finite and |got − expected| ≤ 4·rel·(expected + floor) + expected/1024 + 10⁻⁶
 /// in every channel: four standard errors of an estimate stopped at relative error `rel`
 /// with absolute floor `floor`, plus half-float rounding.

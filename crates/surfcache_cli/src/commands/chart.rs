@@ -142,14 +142,6 @@ pub struct SceneSpec {
     env: EnvArgs,
     points: PathBuf,
     reference: PathBuf,
-    /// Irradiance-map samples per metre and lightmap texels per metre (`None`: the
-    /// method's default).
-    irradiance_map_density: Option<f32>,
-    lightmap_density: Option<f32>,
-    min_samples: Option<u32>,
-    max_samples: Option<u32>,
-    gather: u32,
-    both_sides: bool,
     max_seconds: f64,
 }
 
@@ -166,12 +158,6 @@ fn scene_spec(name: &str, args: &ChartArgs) -> Result<Option<SceneSpec>> {
             env: EnvArgs::default(),
             points: args.assets.join("cornell_points.csv"),
             reference: args.assets.join("cornell_reference.csv"),
-            irradiance_map_density: None,
-            lightmap_density: None,
-            min_samples: None,
-            max_samples: None,
-            gather: surfcache_cache::bake::DEFAULT_GATHER_PASSES,
-            both_sides: true,
             max_seconds: args.max_seconds,
         })),
         "sponza" => {
@@ -196,13 +182,6 @@ fn scene_spec(name: &str, args: &ChartArgs) -> Result<Option<SceneSpec>> {
                 reference: args
                     .assets
                     .join("reference/sponza_visible_immenstadter.csv"),
-                // Every setting as `surfcache bake` has it by default.
-                irradiance_map_density: None,
-                lightmap_density: None,
-                min_samples: None,
-                max_samples: None,
-                gather: surfcache_cache::bake::DEFAULT_GATHER_PASSES,
-                both_sides: true,
                 max_seconds: args.sponza_max_seconds,
             }))
         }
@@ -511,19 +490,16 @@ pub fn run(args: ChartArgs) -> Result<()> {
                         method,
                         sampler,
                         max_rel_error: bound,
-                        min_samples: spec.min_samples,
-                        max_samples: spec.max_samples,
+                        // Every other setting as `surfcache bake` has it by default.
+                        min_samples: None,
+                        max_samples: None,
                         samples: None,
                         bounces: None,
                         seed: args.seed,
-                        density: match method {
-                            Method::IrradianceMap => spec.irradiance_map_density,
-                            Method::Lightmap => spec.lightmap_density,
-                            Method::Vertex => None,
-                        },
+                        density: None,
                         interpolation_error: None,
-                        gather: spec.gather,
-                        both_sides: spec.both_sides,
+                        gather: surfcache_cache::bake::DEFAULT_GATHER_PASSES,
+                        both_sides: true,
                         share_corners: true,
                         filter_passes: None,
                         guiding: true,
@@ -622,17 +598,11 @@ pub fn run(args: ChartArgs) -> Result<()> {
     Ok(())
 }
 
+/// The settings every bake of a chart scene shares: `surfcache bake`'s defaults.
 fn describe_settings(spec: &SceneSpec) -> String {
-    let d = |x: Option<f32>| x.map_or("default".to_string(), |x| format!("{x}"));
-    let n = |x: Option<u32>| x.map_or("default".to_string(), |x| x.to_string());
     format!(
-        "irradiance-map density {} samples/m, lightmap {} texels/m, samples per estimate {} to {}, gathering pre-passes {}, sides {}, each bake capped at {:.0} s",
-        d(spec.irradiance_map_density),
-        d(spec.lightmap_density),
-        n(spec.min_samples),
-        n(spec.max_samples),
-        spec.gather,
-        if spec.both_sides { "both" } else { "front" },
+        "irradiance-map density default samples/m, lightmap default texels/m, samples per estimate default to default, gathering pre-passes {}, sides both, each bake capped at {:.0} s",
+        surfcache_cache::bake::DEFAULT_GATHER_PASSES,
         spec.max_seconds
     )
 }
