@@ -7,10 +7,14 @@
 
 mod common;
 
-use common::{bake, estimator, instance, lookup, traced};
+use common::{bake, estimator, grey, instance, lookup, traced};
 use std::f32::consts::PI;
 use surfcache::cache::{CacheSettings, IrradianceMapSettings, LightmapSettings};
-use surfcache::core::{Environment, Material, glam::Vec3, scenes::cuboid};
+use surfcache::core::{
+    Environment, Material,
+    glam::Vec3,
+    scenes::{cuboid, square},
+};
 
 #[test]
 fn furnace_box_through_bounce_passes_sums_the_series() {
@@ -41,6 +45,53 @@ fn furnace_box_through_bounce_passes_sums_the_series() {
             let got = lookup(cache.as_ref(), &scene, x, n);
             for c in 0..3 {
                 let tol = 4.0 * rel * expected[c] + expected[c] / 1024.0;
+                assert!(
+                    (got[c] - expected[c]).abs() <= tol,
+                    "{}: channel {c} at {x}: {got} against {expected}",
+                    settings.method().name()
+                );
+            }
+        }
+    }
+}
+
+/// A white furnace baked on front faces only: under a uniform sky of radiance L every
+/// surface of albedo 1 leaves L, so E = πL on both sides of everything, whatever the
+/// geometry. A panel hangs over a floor with its front face up, so the floor's gather rays
+/// meet the panel's back face, which a front-only bake leaves out: a path must trace on
+/// there rather than read a value the cache does not hold (it read zero or NaN before:
+/// the floor under the panel came out dark).
+#[test]
+fn a_front_only_bake_traces_through_back_faces_it_does_not_hold() {
+    let sky = Vec3::new(1.0, 0.5, 2.0);
+    let expected = PI * sky;
+    let scene = traced(
+        vec![
+            instance(square("floor", 1.0, 0.0, Vec3::Y), grey(1.0)),
+            instance(square("panel", 0.5, 0.6, Vec3::Y), grey(1.0)),
+        ],
+        Environment::uniform(sky),
+    );
+    let rel = 0.02;
+    for settings in [
+        CacheSettings::IrradianceMap(IrradianceMapSettings {
+            both_sides: false,
+            ..Default::default()
+        }),
+        CacheSettings::Lightmap(LightmapSettings {
+            both_sides: false,
+            ..Default::default()
+        }),
+    ] {
+        let (cache, _) = bake(&scene, settings, estimator(rel));
+        for x in [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(0.2, 0.0, -0.1),
+            Vec3::new(-0.3, 0.0, 0.3),
+        ] {
+            let got = lookup(cache.as_ref(), &scene, x, Vec3::Y);
+            for c in 0..3 {
+                let tol = 4.0 * rel * expected[c];
                 assert!(
                     (got[c] - expected[c]).abs() <= tol,
                     "{}: channel {c} at {x}: {got} against {expected}",

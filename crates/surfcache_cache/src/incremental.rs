@@ -87,10 +87,10 @@ pub struct MappedLookup {
 }
 
 impl IrradianceLookup for MappedLookup {
-    fn irradiance(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
+    fn irradiance(&self, triangle: u32, uv: Vec2, front: bool) -> Option<Vec3> {
         match self.triangle_map.get(triangle as usize) {
-            Some(&t) if t != UNMAPPED => self.cache.lookup(t, uv, front),
-            _ => Vec3::ZERO,
+            Some(&t) if t != UNMAPPED => self.cache.irradiance(t, uv, front),
+            _ => Some(Vec3::ZERO),
         }
     }
 }

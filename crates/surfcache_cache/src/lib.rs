@@ -36,7 +36,7 @@ use surfcache_trace::{Estimate, EstimatorSettings, Guidance, IrradianceLookup, T
 
 pub use irradiance_map::{IrradianceMapSettings, IrradianceMaps};
 pub use lightmap::{LightmapSettings, Lightmaps};
-pub use texture::IrradianceTexture;
+pub use texture::{IrradianceTexture, PublishedLookup};
 pub use vertex_lighting::{VertexLighting, VertexLightingSettings};
 
 /// Which cache to bake. The default is the one that bakes game levels best for the time
@@ -177,6 +177,11 @@ pub trait SurfaceCache: Send + Sync {
 
     /// Baked irradiance E (W/m²) at barycentrics `uv` of `triangle`, on the given side.
     fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3;
+
+    /// Whether the cache bakes that side of `triangle` (a front-only bake leaves back
+    /// faces out): where it does not, [`Self::lookup`] has no meaning and a gathering
+    /// path traces on.
+    fn holds(&self, triangle: u32, front: bool) -> bool;
 
     /// Sample counts, bytes and method-specific figures.
     fn stats(&self) -> CacheStats;
@@ -419,6 +424,10 @@ impl SurfaceCache for Cache {
         self.inner().lookup(triangle, uv, front)
     }
 
+    fn holds(&self, triangle: u32, front: bool) -> bool {
+        self.inner().holds(triangle, front)
+    }
+
     fn stats(&self) -> CacheStats {
         self.inner().stats()
     }
@@ -441,7 +450,8 @@ impl SurfaceCache for Cache {
 }
 
 impl IrradianceLookup for Cache {
-    fn irradiance(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
-        self.lookup(triangle, uv, front)
+    fn irradiance(&self, triangle: u32, uv: Vec2, front: bool) -> Option<Vec3> {
+        self.holds(triangle, front)
+            .then(|| self.lookup(triangle, uv, front))
     }
 }

@@ -3,6 +3,8 @@
 
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
+use surfcache_core::geometry::interpolate;
+use surfcache_trace::TracedScene;
 
 /// One instance's baked irradiance, ready to upload: Bevy's `Lightmap` takes the image,
 /// the UV rectangle and the mesh's `UV_1` (here [`Self::uv1`], per triangle corner).
@@ -36,6 +38,53 @@ impl IrradianceTexture {
     /// Bilinear lookup at `uv` (clamped to the edge), as a GPU sampler does.
     pub fn sample(&self, uv: Vec2) -> Vec3 {
         bilinear(&self.texels, self.width, self.height, uv)
+    }
+}
+
+/// A cache's published textures looked up as a game engine does: a surface point's UV1
+/// interpolated from its triangle's corners, then a plain bilinear fetch from its
+/// instance's texture for that side ([`IrradianceTexture::sample`]). What a player sees,
+/// without the cache's own crossing-aware lookup (docs/design.md, "Crossings").
+pub struct PublishedLookup<'a> {
+    scene: &'a TracedScene,
+    textures: &'a [IrradianceTexture],
+    /// Per instance: index of its front texture and of its back texture in `textures`.
+    sides: Vec<[Option<usize>; 2]>,
+}
+
+impl<'a> PublishedLookup<'a> {
+    /// An index over `textures`, as [`crate::SurfaceCache::publish`] returns them for
+    /// `scene`.
+    pub fn new(textures: &'a [IrradianceTexture], scene: &'a TracedScene) -> Self {
+        let mut sides = vec![[None; 2]; scene.instance_names.len()];
+        for (k, t) in textures.iter().enumerate() {
+            if let Some(s) = sides.get_mut(t.instance as usize) {
+                s[usize::from(!t.front)] = Some(k);
+            }
+        }
+        Self {
+            scene,
+            textures,
+            sides,
+        }
+    }
+
+    /// E at barycentrics `uv` of traced `triangle`, on the given side, as
+    /// [`crate::SurfaceCache::lookup`] takes them; a single-sided instance shows its front
+    /// texture on both sides, as an engine does. `None` where nothing was published.
+    pub fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Option<Vec3> {
+        let t = triangle as usize;
+        let instance = *self.scene.instance.get(t)? as usize;
+        let [f, b] = *self.sides.get(instance)?;
+        let texture = &self.textures[if front { f? } else { b.or(f)? }];
+        let [p0, p1, p2] = *texture.uv1.get(self.scene.local_triangle[t] as usize)?;
+        // Traced corners B and C are the mesh's C and B under a mirroring transform.
+        let (p1, p2) = if self.scene.mirrored[instance] {
+            (p2, p1)
+        } else {
+            (p1, p2)
+        };
+        Some(texture.sample(interpolate(p0, p1, p2, uv)))
     }
 }
 

@@ -219,6 +219,13 @@ impl SurfaceCache for VertexLighting {
         }
     }
 
+    /// Back faces only when both sides are baked (the back of a double-sided material in
+    /// a front-only bake is baked too, but not told apart here: a gathering path traces
+    /// on through it, which is unbiased).
+    fn holds(&self, _triangle: u32, front: bool) -> bool {
+        front || self.settings.both_sides
+    }
+
     /// E = (1−u−v)E_A + u E_B + v E_C.
     fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
         let [a, b, c] = [0, 1, 2].map(|k| self.corner_value(triangle, k, front));

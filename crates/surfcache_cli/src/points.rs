@@ -4,9 +4,9 @@ use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::{io::Write, path::Path};
-use surfcache_cache::SurfaceCache;
+use surfcache_cache::{IrradianceTexture, PublishedLookup, SurfaceCache};
 use surfcache_io::Untrusted;
-use surfcache_trace::{Query, TracedScene};
+use surfcache_trace::{Query, SurfacePoint, TracedScene};
 
 /// Baked irradiance at each query point: the point is located on `geometry` (the baked
 /// triangles, in the cache's order) and looked up in `cache` on the side whose geometric
@@ -16,13 +16,38 @@ pub fn lookup_points<C: SurfaceCache>(
     cache: &C,
     queries: &[Query],
 ) -> Vec<Option<Vec3>> {
+    locate_points(geometry, queries, |p, front| {
+        Some(cache.lookup(p.triangle, p.uv, front))
+    })
+}
+
+/// [`lookup_points`] through the cache's published textures, sampled as a game engine
+/// samples them ([`PublishedLookup`]): what a player sees.
+pub fn lookup_published(
+    geometry: &TracedScene,
+    textures: &[IrradianceTexture],
+    queries: &[Query],
+) -> Vec<Option<Vec3>> {
+    let published = PublishedLookup::new(textures, geometry);
+    locate_points(geometry, queries, |p, front| {
+        published.lookup(p.triangle, p.uv, front)
+    })
+}
+
+/// Each query point located on `geometry`, with the side its normal asks about, and
+/// looked up by `look`.
+fn locate_points(
+    geometry: &TracedScene,
+    queries: &[Query],
+    look: impl Fn(&SurfacePoint, bool) -> Option<Vec3> + Sync,
+) -> Vec<Option<Vec3>> {
     queries
         .par_iter()
         .map(|q| {
             let p = geometry.locate(q.position, q.normal)?;
             let front =
                 geometry.geometric_normals[p.triangle as usize].dot(p.geometric_normal) > 0.0;
-            Some(cache.lookup(p.triangle, p.uv, front))
+            look(&p, front)
         })
         .collect()
 }

@@ -34,8 +34,10 @@ pub struct PathOptions {
 /// ends at its first hit y with L = L_e(y) + ρ/π · E(y): *final gathering*, which shares
 /// the cache's samples among all points that see y instead of tracing deeper bounces.
 pub trait IrradianceLookup: Sync {
-    /// E at barycentrics `uv` of `triangle` on the given side.
-    fn irradiance(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3;
+    /// E at barycentrics `uv` of `triangle` on the given side; `None` where the cache
+    /// holds no value for that side (a back face the bake left out): the path goes on
+    /// there as a full path.
+    fn irradiance(&self, triangle: u32, uv: Vec2, front: bool) -> Option<Vec3>;
 }
 
 /// What the first segment of a path met, for detecting points buried inside geometry.
@@ -192,8 +194,8 @@ impl TracedScene {
     /// which the caller drew `direction` (cosine sampling), or `None` when emission along
     /// it must be counted in full.
     ///
-    /// With `gather`, the path ends at its first hit y, adding ρ/π · E(y) from the lookup
-    /// (its emission still counts, MIS-weighted as above).
+    /// With `gather`, the path ends at its first hit y that the lookup holds, adding
+    /// ρ/π · E(y) from it (its emission still counts, MIS-weighted as above).
     pub fn incident_radiance(
         &self,
         origin: Vec3,
@@ -248,8 +250,7 @@ impl TracedScene {
             if albedo == Vec3::ZERO {
                 break;
             }
-            if let Some(cache) = gather {
-                let e = cache.irradiance(t, hit.uv, front);
+            if let Some(e) = gather.and_then(|cache| cache.irradiance(t, hit.uv, front)) {
                 radiance += throughput * albedo * core::f32::consts::FRAC_1_PI * e;
                 break;
             }

@@ -735,6 +735,12 @@ impl SurfaceCache for IrradianceMaps {
         self.working = Some(w);
     }
 
+    /// Sides with a grid: front faces, and back faces where both sides or the material's
+    /// two sides are baked.
+    fn holds(&self, triangle: u32, front: bool) -> bool {
+        self.order(triangle, front) > 0
+    }
+
     fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
         let g = Self::slot(triangle, front);
         let n = order_of_level(self.levels[g]);

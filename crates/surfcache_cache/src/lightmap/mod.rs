@@ -1303,6 +1303,11 @@ impl SurfaceCache for Lightmaps {
         self.slots.clear();
     }
 
+    /// A front-only bake ([`LightmapSettings::both_sides`] off) has no back layer.
+    fn holds(&self, _triangle: u32, front: bool) -> bool {
+        front || self.layers == 2
+    }
+
     /// Bilinear sample of the side's texture at the triangle's interpolated UV1. A back
     /// side that was not baked (`both_sides` off) is NaN.
     fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {

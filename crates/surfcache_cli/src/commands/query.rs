@@ -3,10 +3,12 @@
 
 use crate::{
     bake_dir::read_archive,
-    points::{lookup_points, read_points, write_results},
+    points::{lookup_points, lookup_published, read_points, write_results},
+    scene_args::{EnvArgs, LoadedWorld},
 };
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use std::path::PathBuf;
+use surfcache_cache::SurfaceCache;
 use surfcache_io::Untrusted;
 
 /// `surfcache query` options (docs/cli.md).
@@ -20,6 +22,12 @@ pub struct QueryArgs {
     /// Output CSV x,y,z,r,g,b (W/m²) [default: stdout].
     #[arg(short = 'o', long = "out")]
     output: Option<PathBuf>,
+    /// Look up through the textures the bake publishes for this scene (the .gltf/.glb or
+    /// built-in scene that was baked), sampled plainly bilinear as a game engine does
+    /// (UV1, then the texture of the instance and side), instead of the cache's own lookup
+    /// (which also honours crossings): what a player sees.
+    #[arg(long, value_name = "SCENE")]
+    published: Option<String>,
 }
 
 pub fn run(args: QueryArgs) -> Result<()> {
@@ -28,7 +36,19 @@ pub fn run(args: QueryArgs) -> Result<()> {
     let geometry = archive
         .geometry()
         .with_context(|| format!("'{}'", Untrusted::path(&args.out_dir)))?;
-    let values = lookup_points(&geometry, &archive.cache, &queries);
+    let values = if let Some(scene_name) = &args.published {
+        let scene = LoadedWorld::load(scene_name, &EnvArgs::default())?.traced()?;
+        if archive.positions != scene.positions {
+            bail!(
+                "the bake in '{}' was made from a different scene than '{}'",
+                Untrusted::path(&args.out_dir),
+                Untrusted::name(scene_name)
+            );
+        }
+        lookup_published(&scene, &archive.cache.publish(&scene), &queries)
+    } else {
+        lookup_points(&geometry, &archive.cache, &queries)
+    };
     let mut off_surface = 0;
     let rows: Vec<String> = queries
         .iter()

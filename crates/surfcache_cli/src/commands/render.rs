@@ -13,7 +13,7 @@ use glam::{Vec2, Vec3};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::path::PathBuf;
-use surfcache_cache::SurfaceCache;
+use surfcache_cache::{PublishedLookup, SurfaceCache};
 use surfcache_trace::{EstimatorSettings, Hit, PointInScene, Sampler, TracedScene, estimate};
 
 #[derive(clap::Args)]
@@ -32,6 +32,10 @@ pub struct RenderArgs {
     /// samples of the nearest sample point, log scale) or `order` (irradiance-map order).
     #[arg(long)]
     show: Option<String>,
+    /// With --cache: shade through the published textures, sampled plainly bilinear as a
+    /// game engine does, instead of the cache's own lookup: what a player sees.
+    #[arg(long)]
+    published: bool,
     /// Camera eye and target `ex,ey,ez,tx,ty,tz` [default: in front of the scene's
     /// bounding box, looking along +Z].
     #[arg(long, value_name = "EX,EY,EZ,TX,TY,TZ")]
@@ -63,8 +67,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if args.cache.is_some() == args.reference.is_some() {
         bail!("give exactly one of --cache OUT_DIR and --reference N");
     }
-    if args.show.is_some() && args.cache.is_none() {
-        bail!("--show needs --cache");
+    if (args.show.is_some() || args.published) && args.cache.is_none() {
+        bail!("--show and --published need --cache");
     }
     if let Some(show) = &args.show
         && show != "samples"
@@ -101,6 +105,13 @@ pub fn run(args: RenderArgs) -> Result<()> {
         .reference
         .map(|n| EstimatorSettings::fixed(Sampler::Best, n, None));
     let show = args.show.as_deref();
+    let textures = match (&archive, args.published) {
+        (Some(a), true) => a.cache.publish(&scene),
+        _ => Vec::new(),
+    };
+    let published = args
+        .published
+        .then(|| PublishedLookup::new(&textures, &scene));
     let bar = ProgressBar::new(height as u64).with_style(
         ProgressStyle::with_template("render {bar:40} {pos}/{len} rows, eta {eta}")
             .expect("static template"),
@@ -118,7 +129,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
             };
         }
         let e = match (&archive, &reference) {
-            (Some(a), _) => a.cache.lookup(hit.triangle, hit.uv, front),
+            (Some(a), _) => match &published {
+                Some(p) => p.lookup(hit.triangle, hit.uv, front).unwrap_or(Vec3::ZERO),
+                None => a.cache.lookup(hit.triangle, hit.uv, front),
+            },
             (None, Some(settings)) => {
                 let p = scene.hit_point(hit, d);
                 let origin = scene.spawn_origin(&p);
