@@ -16,15 +16,9 @@ use surfcache::core::{
     scenes::{cuboid, square},
 };
 
-#[test]
-fn furnace_box_through_bounce_passes_sums_the_series() {
-    let (le, rho) = (Vec3::new(1.0, 2.0, 0.5), 0.6);
-    let expected = PI * le / (1.0 - rho);
-    let wall = Material::emissive("wall", Vec3::splat(rho), le);
-    let mesh = cuboid("box", Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0), true);
-    let scene = traced(vec![instance(mesh, wall)], Environment::black());
-    let rel = 0.02;
-    for settings in [
+/// The caches that gather bounce passes (irradiance maps and lightmaps), front faces only.
+fn front_only_caches() -> [CacheSettings; 2] {
+    [
         CacheSettings::IrradianceMap(IrradianceMapSettings {
             both_sides: false,
             ..Default::default()
@@ -33,7 +27,18 @@ fn furnace_box_through_bounce_passes_sums_the_series() {
             both_sides: false,
             ..Default::default()
         }),
-    ] {
+    ]
+}
+
+#[test]
+fn furnace_box_through_bounce_passes_sums_the_series() {
+    let (le, rho) = (Vec3::new(1.0, 2.0, 0.5), 0.6);
+    let expected = PI * le / (1.0 - rho);
+    let wall = Material::emissive("wall", Vec3::splat(rho), le);
+    let mesh = cuboid("box", Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0), true);
+    let scene = traced(vec![instance(mesh, wall)], Environment::black());
+    let rel = 0.02;
+    for settings in front_only_caches() {
         let (cache, _) = bake(&scene, settings, estimator(rel));
         let points = [
             (Vec3::new(0.5, 0.0, 1.5), Vec3::Y),
@@ -73,16 +78,7 @@ fn a_front_only_bake_traces_through_back_faces_it_does_not_hold() {
         Environment::uniform(sky),
     );
     let rel = 0.02;
-    for settings in [
-        CacheSettings::IrradianceMap(IrradianceMapSettings {
-            both_sides: false,
-            ..Default::default()
-        }),
-        CacheSettings::Lightmap(LightmapSettings {
-            both_sides: false,
-            ..Default::default()
-        }),
-    ] {
+    for settings in front_only_caches() {
         let (cache, _) = bake(&scene, settings, estimator(rel));
         for x in [
             Vec3::new(0.0, 0.0, 0.0),
