@@ -181,6 +181,9 @@ struct Baseline {
     entities: Vec<Entity>,
     outcome: BakeOutcome,
     published: Arc<PublishedLightmaps>,
+    /// The settings the bake was asked for ([`BakeConfig::settings`]); the outcome's
+    /// differ where the bake fitted them to the scene (density budget, floor).
+    requested: BakeSettings,
 }
 
 /// A finished bake's results (the cache, its scene, the textures per entity), on their
@@ -193,11 +196,14 @@ pub(crate) struct BakeResult {
     pub entities: Vec<Entity>,
     pub outcome: BakeOutcome,
     pub published: Arc<PublishedLightmaps>,
+    /// The settings the bake was asked for.
+    pub requested: BakeSettings,
 }
 
 /// One bake: the job, its scene and what it needs to publish.
 struct Run {
     job: Job,
+    requested: BakeSettings,
     scene: Arc<TracedScene>,
     entities: Vec<Entity>,
     /// Which bake this is ([`Baking::bake_id`]).
@@ -230,6 +236,7 @@ impl Run {
             entities: self.entities,
             outcome,
             published: Arc::new(published),
+            requested: self.requested,
         })
     }
 
@@ -359,15 +366,9 @@ fn plan(
     let Some(base) = &baking.baseline else {
         return full();
     };
-    let mut same_settings = base.outcome.settings;
-    // The baseline's floor was measured on its scene; the rest must match.
-    same_settings.estimator.floor = config.settings.estimator.floor;
-    same_settings
-        .cache
-        .set_floor(config.settings.estimator.floor);
-    let mut requested = config.settings;
-    requested.cache.set_floor(config.settings.estimator.floor);
-    if baking.global || same_settings != requested {
+    // Compared as asked for: a bake fits its own settings to the scene (the density
+    // budget, the floor it measures), and the re-bake keeps the baseline's fitted ones.
+    if baking.global || base.requested != config.settings {
         return full();
     }
     let (region, changed_triangles) = changed_region(
@@ -442,6 +443,7 @@ pub fn start_bake(
                     entities: base.entities.clone(),
                     outcome: base.outcome.clone(),
                     published: base.published.clone(),
+                    requested: base.requested,
                 });
             }
             baking.changed.clear();
@@ -450,6 +452,7 @@ pub fn start_bake(
     };
     let run = Run {
         job,
+        requested: config.settings,
         scene,
         entities,
         id: baking.bake_id,
@@ -595,6 +598,7 @@ fn accept(
                 entities: f.entities.clone(),
                 outcome: f.outcome.clone(),
                 published: f.published.clone(),
+                requested: f.requested,
             });
             baking.changed.clear();
             baking.global = false;

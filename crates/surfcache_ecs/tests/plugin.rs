@@ -389,6 +389,34 @@ fn settings_changes_rebake_and_unchanged_settings_republish() {
     assert_eq!(cache.method(), Method::IrradianceMap);
 }
 
+/// A bake fits its settings to the scene (here a density budget lowers the lightmaps'
+/// density, as `surfcache bake`'s defaults do on a level); an edit afterwards must still
+/// re-bake incrementally: the policy compares the settings asked for, not the fitted ones
+/// (it compared the fitted ones, so every edit under the default budget re-baked from
+/// scratch).
+#[test]
+fn an_edit_re_bakes_incrementally_when_the_bake_fitted_its_density() {
+    let mut config = config(Method::Lightmap);
+    config.settings.density_budget = Some(100);
+    let asked = config.settings.cache.density();
+    let (mut world, mut schedule, _) = world_with(&scenes::cornell(), config);
+    let first = bake(&mut world, &mut schedule);
+    assert!(!first.incremental);
+    let fitted = world
+        .resource::<BakedSurfaceCache>()
+        .outcome
+        .as_ref()
+        .unwrap()
+        .settings;
+    assert!(
+        fitted.cache.density() < asked,
+        "the budget lowered the density"
+    );
+    move_block(&mut world);
+    let rebake = bake(&mut world, &mut schedule);
+    assert!(rebake.incremental, "re-baked incrementally");
+}
+
 /// A square panel of `n` × `n` quads (2 n² triangles) just below the Cornell box's
 /// ceiling, facing down: enough triangles that each BVH build takes a while.
 fn dense_panel(n: u32) -> Mesh {
