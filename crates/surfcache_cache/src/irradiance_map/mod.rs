@@ -142,8 +142,8 @@ pub use grid::{
 use grid::{corner_of, for_each_new_sample, order_of_level};
 pub(crate) use settings::EstimateTotals;
 pub use settings::IrradianceMapSettings;
-use sharing::UNSHARED;
 pub use sharing::corner_links;
+use surfcache_core::index::NO_INDEX;
 
 use crate::burial::Burial;
 use crate::{
@@ -180,7 +180,7 @@ struct Working {
     /// Burial state of every sample ([`Burial::Buried`] or [`Burial::Valid`] when estimated).
     burial: Vec<Burial>,
     /// Per sample: its crossing line in [`IrradianceMaps::lines`], or
-    /// [`crossings::NO_LINE`] (module docs, Crossings).
+    /// [`NO_INDEX`] (module docs, Crossings).
     line_of: Vec<u32>,
     /// Grid slots another surface crosses ([`crossed_grids`]): their samples are probed.
     crossed: Vec<bool>,
@@ -198,14 +198,14 @@ struct Working {
     shadow_edges: Vec<bool>,
     /// Corner links: `links[3·slot + k]` is `3·slot' + k'` when corner k of grid `slot`
     /// takes the estimate of corner k' of grid `slot'`, its representative, or
-    /// [`UNSHARED`]; empty when corners are not shared ([`corner_links`]).
+    /// [`NO_INDEX`]; empty when corners are not shared ([`corner_links`]).
     links: Vec<u32>,
     /// Per new grid sample of the current round, in [`for_each_new_sample`] order over
     /// `pending`: the round point whose estimate it takes.
     sources: Vec<u32>,
     /// Re-bakes: values of the maps before an edit, grid by grid, for the first round
     /// ([`SamplePoint::prior`]); `prior_offsets[g]` is grid slot g's first, or
-    /// `u32::MAX` for a grid without one.
+    /// [`NO_INDEX`] for a grid without one.
     priors: Vec<Vec3>,
     prior_offsets: Vec<u32>,
 }
@@ -293,7 +293,7 @@ pub struct IrradianceMaps {
     #[serde(default)]
     crossed_grids: Vec<[u32; 2]>,
     /// Per sample of each crossed grid, in [`grid_index`] order: its line in `lines`, or
-    /// [`crossings::NO_LINE`].
+    /// [`NO_INDEX`].
     #[serde(default)]
     sample_lines: Vec<u32>,
     #[serde(skip)]
@@ -506,18 +506,18 @@ impl SurfaceCache for IrradianceMaps {
             let (t, front) = (g / 2, g % 2 == 0);
             let (coarse, n) = w.round_orders(g as usize, &self.levels);
             if coarse == 0 && !w.links.is_empty() && corner_points.is_empty() {
-                corner_points = vec![u32::MAX; w.links.len()];
+                corner_points = vec![NO_INDEX; w.links.len()];
             }
             let key = scene.triangle_key(t);
             let inv = 1.0 / n as f32;
             let prior_base = match w.prior_offsets.get(g as usize) {
-                Some(&o) if coarse == 0 && o != u32::MAX => Some(o as usize),
+                Some(&o) if coarse == 0 && o != NO_INDEX => Some(o as usize),
                 _ => None,
             };
             let crossed = w.crossed[g as usize];
             for_each_new_sample(coarse, n, |i, j, m| {
                 let mut uv = Vec2::new(i as f32 * inv, j as f32 * inv);
-                let mut line = crossings::NO_LINE;
+                let mut line = NO_INDEX;
                 let sample_key = sample_key(key, front, i, j, n);
                 if crossed {
                     let (site, crossing, foot) = probed.next().expect("one probe per new sample");
@@ -548,7 +548,7 @@ impl SurfaceCache for IrradianceMaps {
                 };
                 if let Some(c) = corner {
                     let link = w.links[c];
-                    if link != UNSHARED && corner_points[link as usize] != u32::MAX {
+                    if link != NO_INDEX && corner_points[link as usize] != NO_INDEX {
                         w.sources.push(corner_points[link as usize]);
                         return;
                     }
@@ -605,7 +605,7 @@ impl SurfaceCache for IrradianceMaps {
         let mut samples = vec![0u32; total];
         let mut std_error = vec![Vec3::ZERO; total];
         let mut burial = vec![Burial::Valid; total];
-        let mut line_of = vec![crossings::NO_LINE; total];
+        let mut line_of = vec![NO_INDEX; total];
         for g in 0..slots {
             let (old, new) = (
                 order_of_level(self.levels[g]),
@@ -758,7 +758,7 @@ impl SurfaceCache for IrradianceMaps {
                 let first = self.crossed_grids[k][1] as usize;
                 let lines = &self.sample_lines[first..first + grid_size(n)];
                 let near = |i, j| match lines[grid_index(i, j)] {
-                    crossings::NO_LINE => value(i, j),
+                    NO_INDEX => value(i, j),
                     l => self.lines[l as usize].value(
                         uv,
                         value(i, j),
@@ -766,7 +766,7 @@ impl SurfaceCache for IrradianceMaps {
                     ),
                 };
                 grid_interpolate_kept(n, uv, near, |i, j| match lines[grid_index(i, j)] {
-                    crossings::NO_LINE => true,
+                    NO_INDEX => true,
                     l => self.lines[l as usize].on_side(uv),
                 })
             }
@@ -785,7 +785,7 @@ impl SurfaceCache for IrradianceMaps {
         let mut start_log2: Vec<u8> = (0..slots)
             .map(|g| fresh.working.as_ref().map_or(1, |w| w.start_log2(g)))
             .collect();
-        let mut prior_offsets = vec![u32::MAX; slots];
+        let mut prior_offsets = vec![NO_INDEX; slots];
         let mut priors = Vec::new();
         for g in 0..slots {
             let (t, front) = ((g / 2) as u32, g % 2 == 0);
