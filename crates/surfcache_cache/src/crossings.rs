@@ -28,9 +28,6 @@ use serde::{Deserialize, Serialize};
 use surfcache_core::geometry::{interpolate, longest_edge, orthonormal_basis, plane_barycentric};
 use surfcache_trace::{Estimate, TracedScene};
 
-/// "No crossing line" in a cache's per-sample line indices.
-pub const NO_LINE: u32 = u32::MAX;
-
 /// How far, in sample spacings (a texel, a grid spacing), a cache probes its samples for
 /// the crossing lines its lookups use: a little over one, so that the samples on both
 /// sides of a crossing between two of them know it, and one of the

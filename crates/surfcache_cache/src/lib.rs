@@ -32,6 +32,7 @@ pub mod vertex_lighting;
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
+use surfcache_core::index::NO_INDEX;
 use surfcache_trace::{Estimate, EstimatorSettings, Guidance, IrradianceLookup, TracedScene};
 
 pub use irradiance_map::{IrradianceMapSettings, IrradianceMaps};
@@ -204,8 +205,9 @@ pub trait SurfaceCache: Send + Sync {
         Self: Sized;
 }
 
-/// A triangle of an edited scene that has no counterpart before the edit.
-pub const UNMAPPED: u32 = u32::MAX;
+/// A triangle of an edited scene that has no counterpart before the edit: the
+/// `triangle_map` name of [`NO_INDEX`].
+pub const UNMAPPED: u32 = NO_INDEX;
 
 /// Corresponding triangles of a scene before and after an edit: `map[t_new]` is the old
 /// index of new triangle `t_new`, or [`UNMAPPED`]. Instances correspond when

@@ -33,6 +33,7 @@ use crate::{
 };
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
+use surfcache_core::index::NO_INDEX;
 use surfcache_core::{geometry::interpolate, sampling::splitmix64};
 use surfcache_trace::{Estimate, TracedScene};
 
@@ -98,14 +99,14 @@ impl VertexLighting {
                 .max()
                 .map_or(0, |&v| v as usize + 1);
             map.clear();
-            map.resize(largest, u32::MAX);
+            map.resize(largest, NO_INDEX);
             for (ids, vertices) in corners[lo..hi]
                 .iter_mut()
                 .zip(&scene.vertex_indices[lo..hi])
             {
                 for (id, &v) in ids.iter_mut().zip(vertices) {
                     let slot = &mut map[v as usize];
-                    if *slot == u32::MAX {
+                    if *slot == NO_INDEX {
                         *slot = next;
                         next += 1;
                     }

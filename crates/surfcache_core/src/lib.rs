@@ -10,6 +10,7 @@
 pub mod color;
 pub mod environment;
 pub mod geometry;
+pub mod index;
 pub mod sampling;
 pub mod scene;
 pub mod scenes;

@@ -7,11 +7,9 @@ use surfcache_core::{
     EnvironmentSampler,
     color::luminance,
     geometry::{interpolate, triangle_area, triangle_point},
+    index::NO_INDEX,
     sampling::{Distribution1D, uniform_triangle},
 };
-
-/// Marks a triangle that is not in the emitter list.
-const NOT_AN_EMITTER: u32 = u32::MAX;
 
 /// The light sources of a scene that next-event estimation samples (punctual lights are
 /// handled exactly, by shadow rays, and are not part of this).
@@ -23,7 +21,7 @@ pub struct LightSampler {
     emitter_area: Vec<f32>,
     /// Choice among emitters, proportional to power π A Y(L_e) (doubled when two-sided).
     emitter_distribution: Distribution1D,
-    /// Position of each triangle in `emitters`, or [`NOT_AN_EMITTER`].
+    /// Position of each triangle in `emitters`, or [`NO_INDEX`].
     emitter_slot: Vec<u32>,
     /// Importance sampling of the environment map (`None`: no map, or a black one).
     environment: Option<EnvironmentSampler>,
@@ -50,7 +48,7 @@ impl LightSampler {
         let mut emitters = Vec::new();
         let mut emitter_area = Vec::new();
         let mut power = Vec::new();
-        let mut emitter_slot = vec![NOT_AN_EMITTER; scene.triangle_count()];
+        let mut emitter_slot = vec![NO_INDEX; scene.triangle_count()];
         for t in 0..scene.triangle_count() as u32 {
             let m = scene.material_of(t);
             if !m.is_emissive() {
@@ -169,7 +167,7 @@ impl LightSampler {
     #[inline]
     pub fn pdf_emitter(&self, scene: &TracedScene, t: u32, x: Vec3, y: Vec3, w: Vec3) -> f32 {
         let k = self.emitter_slot[t as usize];
-        if k == NOT_AN_EMITTER {
+        if k == NO_INDEX {
             return 0.0;
         }
         let k = k as usize;

@@ -14,9 +14,7 @@
 
 use glam::{Vec2, Vec3};
 use std::collections::{HashMap, VecDeque};
-
-/// No triangle, chart or vertex.
-pub(super) const NONE: u32 = u32::MAX;
+use surfcache_core::index::NO_INDEX;
 
 /// Triangles sharing an edge grow into one chart when their normals are within this
 /// angle: sharper creases always end a chart (irradiance changes across them, and each
@@ -31,7 +29,7 @@ pub(super) struct ChartMesh {
     pub positions: Vec<[Vec3; 3]>,
     pub normals: Vec<Vec3>,
     /// Across edge k (corners k and k + 1): the neighbour triangle and its edge, or
-    /// (NONE, 0).
+    /// (NO_INDEX, 0).
     pub across: Vec<[(u32, u8); 3]>,
     /// The same for the edges that are manifold and consistently oriented but sharper
     /// than [`SMOOTH_ANGLE_DEGREES`] (creases), which charts grow over only when merged
@@ -62,8 +60,8 @@ impl ChartMesh {
         }
         edges.sort_unstable();
         let cos_smooth = SMOOTH_ANGLE_DEGREES.to_radians().cos();
-        let mut across = vec![[(NONE, 0u8); 3]; n];
-        let mut creases = vec![[(NONE, 0u8); 3]; n];
+        let mut across = vec![[(NO_INDEX, 0u8); 3]; n];
+        let mut creases = vec![[(NO_INDEX, 0u8); 3]; n];
         let mut start = 0;
         while start < edges.len() {
             let mut end = start + 1;
@@ -113,8 +111,8 @@ impl ChartMesh {
             .collect();
         let inside = |edges: [(u32, u8); 3]| {
             edges.map(|(u, j)| match local.get(&u) {
-                Some(&l) if u != NONE => (l, j),
-                _ => (NONE, 0),
+                Some(&l) if u != NO_INDEX => (l, j),
+                _ => (NO_INDEX, 0),
             })
         };
         let (mut across, mut creases): (Vec<_>, Vec<_>) = tris
@@ -129,8 +127,8 @@ impl ChartMesh {
         if glue_creases {
             for (a, c) in across.iter_mut().zip(&mut creases) {
                 for k in 0..3 {
-                    if c[k].0 != NONE {
-                        a[k] = std::mem::replace(&mut c[k], (NONE, 0));
+                    if c[k].0 != NO_INDEX {
+                        a[k] = std::mem::replace(&mut c[k], (NO_INDEX, 0));
                     }
                 }
             }
@@ -195,7 +193,7 @@ pub(super) fn grow(
     let mut queue: VecDeque<(u32, u8, u32, u8)> = VecDeque::new();
     let push_neighbours = |t: u32, queue: &mut VecDeque<_>, chart: &[u32]| {
         for (e, &(u, j)) in mesh.across[t as usize].iter().enumerate() {
-            if u != NONE && chart[u as usize] == NONE {
+            if u != NO_INDEX && chart[u as usize] == NO_INDEX {
                 queue.push_back((u, j, t, e as u8));
             }
         }
@@ -203,19 +201,19 @@ pub(super) fn grow(
     push_neighbours(seed, &mut queue, chart);
     while let Some((t, k, p, kp)) = queue.pop_front() {
         let tu = t as usize;
-        if chart[tu] != NONE || !allowed(t) {
+        if chart[tu] != NO_INDEX || !allowed(t) {
             continue;
         }
         let (k, kp) = (k as usize, kp as usize);
         // Corner k of t is corner kp + 1 of p, corner k + 1 is corner kp.
         let pcorners = g.corners[slot[p as usize] as usize];
-        let mut corners = [NONE; 3];
+        let mut corners = [NO_INDEX; 3];
         corners[k] = pcorners[(kp + 1) % 3];
         corners[(k + 1) % 3] = pcorners[kp];
         let third = (k + 2) % 3;
         // The third corner through a second glued edge, when its known corner is the
         // same chart vertex on both sides.
-        let in_chart = |u: u32| u != NONE && chart[u as usize] == id;
+        let in_chart = |u: u32| u != NO_INDEX && chart[u as usize] == id;
         for e in [(k + 1) % 3, third] {
             let (q, j) = mesh.across[tu][e];
             if !in_chart(q) {
@@ -235,7 +233,7 @@ pub(super) fn grow(
             }
         }
         // Gluing all three edges would close the chart: cut instead.
-        if corners[third] != NONE {
+        if corners[third] != NO_INDEX {
             let glued = (0..3)
                 .filter(|&e| {
                     let (q, j) = mesh.across[tu][e];
@@ -247,10 +245,10 @@ pub(super) fn grow(
                 })
                 .count();
             if glued == 3 {
-                corners[third] = NONE;
+                corners[third] = NO_INDEX;
             }
         }
-        if corners[third] == NONE {
+        if corners[third] == NO_INDEX {
             let p3 = mesh.positions[tu];
             let (ua, ub) = (
                 g.uv[corners[k] as usize],
@@ -268,14 +266,14 @@ pub(super) fn grow(
     g
 }
 
-/// Breadth-first hop counts from `seed` over the mesh's edges (NONE where unreachable).
+/// Breadth-first hop counts from `seed` over the mesh's edges (NO_INDEX where unreachable).
 fn hops(mesh: &ChartMesh, seed: u32) -> Vec<u32> {
-    let mut dist = vec![NONE; mesh.len()];
+    let mut dist = vec![NO_INDEX; mesh.len()];
     let mut queue = VecDeque::from([seed]);
     dist[seed as usize] = 0;
     while let Some(t) = queue.pop_front() {
         for &(u, _) in &mesh.across[t as usize] {
-            if u != NONE && dist[u as usize] == NONE {
+            if u != NO_INDEX && dist[u as usize] == NO_INDEX {
                 dist[u as usize] = dist[t as usize] + 1;
                 queue.push_back(u);
             }
@@ -290,7 +288,7 @@ fn hops(mesh: &ChartMesh, seed: u32) -> Vec<u32> {
 /// part of its own. Returns the parts' triangles.
 pub(super) fn split(mesh: &ChartMesh, a: u32, b: u32) -> Vec<Vec<u32>> {
     let (da, db) = (hops(mesh, a), hops(mesh, b));
-    let mut chart = vec![NONE; mesh.len()];
+    let mut chart = vec![NO_INDEX; mesh.len()];
     let mut slot = vec![0u32; mesh.len()];
     let mut parts = vec![
         grow(mesh, a, 0, &mut chart, &mut slot, |t| {
@@ -299,7 +297,7 @@ pub(super) fn split(mesh: &ChartMesh, a: u32, b: u32) -> Vec<Vec<u32>> {
         .tris,
     ];
     for seed in std::iter::once(b).chain(0..mesh.len() as u32) {
-        if chart[seed as usize] == NONE {
+        if chart[seed as usize] == NO_INDEX {
             let id = parts.len() as u32;
             parts.push(grow(mesh, seed, id, &mut chart, &mut slot, |_| true).tris);
         }

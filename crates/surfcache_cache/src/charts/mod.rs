@@ -23,11 +23,12 @@ pub use parameterise::{MAX_STRETCH, TEXEL_REACH, singular_values};
 
 use crate::lightmap::texels_overlapped_by;
 use glam::{Vec2, Vec3};
-use growing::{ChartMesh, NONE, grow};
+use growing::{ChartMesh, grow};
 use packing::{Claim, pack_claims};
 use parameterise::{FlatChart, flatten_or_split};
 use rayon::prelude::*;
 use std::collections::HashMap;
+use surfcache_core::index::NO_INDEX;
 
 /// Triangles sharing an edge join a chart when their normals lie within this angle of the
 /// chart's seed triangle.
@@ -103,11 +104,11 @@ pub fn coplanar_charts(positions: &[[Vec3; 3]], normals: &[Vec3]) -> Charts {
         row[i + 1] += row[i];
     }
     let cos_limit = CHART_ANGLE_DEGREES.to_radians().cos();
-    let mut chart = vec![u32::MAX; n];
+    let mut chart = vec![NO_INDEX; n];
     let mut count = 0u32;
     let mut queue: Vec<u32> = Vec::new();
     for seed in 0..n {
-        if chart[seed] != u32::MAX {
+        if chart[seed] != NO_INDEX {
             continue;
         }
         let normal = normals[seed];
@@ -118,7 +119,7 @@ pub fn coplanar_charts(positions: &[[Vec3; 3]], normals: &[Vec3]) -> Charts {
             let t = t as usize;
             for &(_, nb) in &pairs[row[t] as usize..row[t + 1] as usize] {
                 let nb = nb as usize;
-                if chart[nb] == u32::MAX && normals[nb].dot(normal) >= cos_limit {
+                if chart[nb] == NO_INDEX && normals[nb].dot(normal) >= cos_limit {
                     chart[nb] = count;
                     queue.push(nb as u32);
                 }
@@ -233,11 +234,11 @@ pub fn generate_atlas(
         })
         .collect();
     let mesh = ChartMesh::new(positions, normals, &weld, &degenerate);
-    let mut chart = vec![NONE; n];
+    let mut chart = vec![NO_INDEX; n];
     let mut slot = vec![0u32; n];
     let mut parts: Vec<Vec<u32>> = Vec::new();
     for t in 0..n {
-        if !degenerate[t] && chart[t] == NONE {
+        if !degenerate[t] && chart[t] == NO_INDEX {
             let id = parts.len() as u32;
             parts.push(grow(&mesh, t as u32, id, &mut chart, &mut slot, |_| true).tris);
         }
@@ -307,7 +308,11 @@ fn merge_small_parts(
     let limit = SMALL_TEXELS / density;
     for t in 0..mesh.len() {
         for &(u, _) in &mesh.creases[t] {
-            if u == NONE || (u as usize) < t || part[t] == NONE || part[u as usize] == NONE {
+            if u == NO_INDEX
+                || (u as usize) < t
+                || part[t] == NO_INDEX
+                || part[u as usize] == NO_INDEX
+            {
                 continue;
             }
             let (a, b) = (find(&mut root, part[t]), find(&mut root, part[u as usize]));
@@ -387,7 +392,7 @@ fn lay_out(
     let height = (rows.div_ceil(4) * 4).max(4);
     let size = Vec2::new(width as f32, height as f32);
     let mut uv1 = vec![[Vec2::ZERO; 3]; n];
-    let mut chart = vec![NONE; n];
+    let mut chart = vec![NO_INDEX; n];
     let mut boxes = Vec::with_capacity(flat.len());
     for (c, ((f, t), p)) in flat.iter().zip(&texels).zip(&placements).enumerate() {
         let turn = usize::from(p.turned);

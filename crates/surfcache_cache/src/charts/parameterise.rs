@@ -21,11 +21,12 @@
 
 use super::{
     CHART_ANGLE_DEGREES, TEXEL_EPSILON,
-    growing::{ChartMesh, Grown, NONE, farthest, grow, split},
+    growing::{ChartMesh, Grown, farthest, grow, split},
 };
 use crate::lightmap::texels_overlapped_by;
 use glam::{Mat2, Vec2, Vec3};
 use surfcache_core::geometry::{closest_point_barycentric, interpolate, orthonormal_basis};
+use surfcache_core::index::NO_INDEX;
 
 /// Largest ratio of texel densities (singular values of the map) within one chart.
 pub const MAX_STRETCH: f32 = 1.25;
@@ -52,7 +53,7 @@ pub(super) struct FlatChart {
 /// Flattens the connected `mesh` (a grown chart's triangles) as one chart, or as parts
 /// when it fails the checks (module docs), at `density` texels per metre.
 pub(super) fn flatten_or_split(mesh: &ChartMesh, density: f32, out: &mut Vec<FlatChart>) {
-    let mut chart = vec![NONE; mesh.len()];
+    let mut chart = vec![NO_INDEX; mesh.len()];
     let mut slot = vec![0u32; mesh.len()];
     let grown = grow(mesh, 0, 0, &mut chart, &mut slot, |_| true);
     debug_assert_eq!(grown.tris.len(), mesh.len());
@@ -438,7 +439,7 @@ fn texels_disagree(
     let (w, h) = (size.x as usize, size.y as usize);
     let limit = TEXEL_REACH * MAX_STRETCH / density;
     let limit2 = limit * limit;
-    let mut kept: Vec<(Vec3, u32)> = vec![(Vec3::NAN, NONE); w * h];
+    let mut kept: Vec<(Vec3, u32)> = vec![(Vec3::NAN, NO_INDEX); w * h];
     let mut conflict = None;
     for (i, (&t, q)) in tris.iter().zip(uv).enumerate() {
         let [a, b, c] = mesh.positions[t as usize];
@@ -454,12 +455,12 @@ fn texels_disagree(
             for j in y.saturating_sub(1)..(y + 2).min(h) {
                 for k in x.saturating_sub(1)..(x + 2).min(w) {
                     let (other, owner) = kept[j * w + k];
-                    if owner != NONE && (other - point).length_squared() > limit2 {
+                    if owner != NO_INDEX && (other - point).length_squared() > limit2 {
                         conflict = Some((owner, i as u32));
                     }
                 }
             }
-            if kept[y * w + x].1 == NONE {
+            if kept[y * w + x].1 == NO_INDEX {
                 kept[y * w + x] = (point, i as u32);
             }
         });

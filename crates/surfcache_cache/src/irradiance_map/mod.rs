@@ -128,143 +128,44 @@
 //! assert!((e - Vec3::splat(std::f32::consts::PI)).abs().max_element() < 0.02);
 //! assert_eq!(maps.stats().order_histogram[&2], 4); // 2 triangles × 2 sides, flat E
 //! ```
+//!
+//! The parts: [`grid`] (one barycentric grid), [`settings`], [`sharing`] (shared
+//! corners), [`forced_refinement`] (shadow probes and crossed grids), [`working`] (the
+//! state of a bake in progress), [`rounds`] (the points of each round and what its
+//! estimates change) and [`refinement`] (burial fill and the refinement test).
 
 mod forced_refinement;
 mod grid;
+mod refinement;
+mod rounds;
 mod settings;
 mod sharing;
+mod working;
 
 pub use forced_refinement::{crossed_grids, punctual_shadow_edges};
+use grid::order_of_level;
 pub use grid::{
     KEY_RESOLUTION, MAX_ORDER_LIMIT, coarse_neighbours, grid_index, grid_interpolate,
     grid_interpolate_kept, grid_size, sample_key,
 };
-use grid::{corner_of, for_each_new_sample, order_of_level};
 pub(crate) use settings::EstimateTotals;
 pub use settings::IrradianceMapSettings;
-use sharing::UNSHARED;
 pub use sharing::corner_links;
 
 use crate::burial::Burial;
 use crate::{
-    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
-    UNMAPPED, crossings, mesh_colour,
+    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SurfaceCache, UNMAPPED,
+    crossings, mesh_colour,
     stored_rgb::{STORED_RGB_BYTES, StoreScale, StoredRgb},
 };
 use crossings::SampleCrossing;
 use glam::{Vec2, Vec3};
+use rounds::grown_layout;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use surfcache_core::{geometry::longest_edge, sampling::splitmix64};
+use surfcache_core::{geometry::longest_edge, index::NO_INDEX};
 use surfcache_trace::{Estimate, TracedScene};
-
-/// What only baking needs: raw estimates, their errors, burial flags, refinement state.
-/// Arrays are parallel to the stored samples.
-#[derive(Clone, Debug, Default, PartialEq)]
-struct Working {
-    /// Maximum order per triangle.
-    max_orders: Vec<u32>,
-    /// Whether each grid slot asks to double (or, before its first round, to be baked).
-    refine: Vec<bool>,
-    /// Grid slots whose new samples the current round estimates, ascending.
-    pending: Vec<u32>,
-    /// Number of points the current round asked for.
-    pending_points: usize,
-    /// Raw estimates E, their sample counts and standard errors.
-    raw: Vec<Vec3>,
-    samples: Vec<u32>,
-    std_error: Vec<Vec3>,
-    /// Values after burial filling, and their standard errors.
-    filled: Vec<Vec3>,
-    filled_error: Vec<Vec3>,
-    /// Burial state of every sample ([`Burial::Buried`] or [`Burial::Valid`] when estimated).
-    burial: Vec<Burial>,
-    /// Per sample: its crossing line in [`IrradianceMaps::lines`], or
-    /// [`crossings::NO_LINE`] (module docs, Crossings).
-    line_of: Vec<u32>,
-    /// Grid slots another surface crosses ([`crossed_grids`]): their samples are probed.
-    crossed: Vec<bool>,
-    /// Per new grid sample of the current round, in the order of `sources`: its line.
-    round_lines: Vec<u32>,
-    /// Per line: the estimate at its sample's foot (NaN: none, or buried).
-    feet: Vec<Vec3>,
-    /// This round's foot points: (line, round point).
-    round_feet: Vec<(u32, u32)>,
-    /// Order (log2) of each grid slot's first round; empty: `min(2, n_max)` everywhere.
-    start_log2: Vec<u8>,
-    /// Grid slots whose punctual lights' shadow boundary crosses them
-    /// ([`punctual_shadow_edges`]) or that another surface crosses ([`crossed_grids`]):
-    /// they refine to their maximum order.
-    shadow_edges: Vec<bool>,
-    /// Corner links: `links[3·slot + k]` is `3·slot' + k'` when corner k of grid `slot`
-    /// takes the estimate of corner k' of grid `slot'`, its representative, or
-    /// [`UNSHARED`]; empty when corners are not shared ([`corner_links`]).
-    links: Vec<u32>,
-    /// Per new grid sample of the current round, in [`for_each_new_sample`] order over
-    /// `pending`: the round point whose estimate it takes.
-    sources: Vec<u32>,
-    /// Re-bakes: values of the maps before an edit, grid by grid, for the first round
-    /// ([`SamplePoint::prior`]); `prior_offsets[g]` is grid slot g's first, or
-    /// `u32::MAX` for a grid without one.
-    priors: Vec<Vec3>,
-    prior_offsets: Vec<u32>,
-}
-
-impl Working {
-    /// The order grid slot `g` has (`coarse`, 0 before its first round) and the order
-    /// this round gives it: its first order, or double.
-    fn round_orders(&self, g: usize, levels: &[u8]) -> (u32, u32) {
-        match order_of_level(levels[g]) {
-            0 => (0, 1 << self.start_log2(g)),
-            coarse => (coarse, 2 * coarse),
-        }
-    }
-
-    /// log2 of the order grid slot `g` starts at: a re-bake's prior order, else
-    /// `min(2, n_max)`.
-    fn start_log2(&self, g: usize) -> u8 {
-        match self.start_log2.get(g) {
-            Some(&l) => l,
-            None => (self.max_orders[g / 2] >= 2) as u8,
-        }
-    }
-}
-
-/// Probes the new samples of this round's crossed grids ([`crossings::probe`], as far as
-/// one spacing of the grid's maximum order, where lookups use the lines), in the order
-/// [`SurfaceCache::next_round`] visits them: each sample's site (a sample on a crossing
-/// surface moves just beyond it, as lightmap texels do) and its crossing line, oriented
-/// from the site, in barycentric coordinates.
-fn probe_new_samples(
-    scene: &TracedScene,
-    w: &Working,
-    levels: &[u8],
-) -> Vec<(Vec2, Option<SampleCrossing>, Option<Vec2>)> {
-    use rayon::prelude::*;
-    let mut sites = Vec::new();
-    for &g in w.pending.iter().filter(|&&g| w.crossed[g as usize]) {
-        let (coarse, n) = w.round_orders(g as usize, levels);
-        let inv = 1.0 / n as f32;
-        for_each_new_sample(coarse, n, |i, j, _| {
-            sites.push((g, Vec2::new(i as f32 * inv, j as f32 * inv)));
-        });
-    }
-    sites
-        .par_iter()
-        .map(|&(g, uv)| {
-            let (t, front) = (g / 2, g % 2 == 0);
-            let [a, b, c] = scene.positions[t as usize];
-            let reach =
-                crossings::LINE_REACH * longest_edge(a, b, c) / w.max_orders[t as usize] as f32;
-            let probe = crossings::probe(scene, t, uv, front, reach);
-            let site = probe.site(uv);
-            let kept = probe.crossing.and_then(|crossing| {
-                SampleCrossing::new(scene, t, front, &crossing, crossings::BARYCENTRIC, site)
-            });
-            (site, kept.map(|(c, _)| c), kept.and_then(|(_, foot)| foot))
-        })
-        .collect()
-}
+use working::Working;
 
 /// Per-triangle adaptive irradiance maps (module docs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -293,7 +194,7 @@ pub struct IrradianceMaps {
     #[serde(default)]
     crossed_grids: Vec<[u32; 2]>,
     /// Per sample of each crossed grid, in [`grid_index`] order: its line in `lines`, or
-    /// [`crossings::NO_LINE`].
+    /// [`NO_INDEX`].
     #[serde(default)]
     sample_lines: Vec<u32>,
     #[serde(skip)]
@@ -386,95 +287,6 @@ impl IrradianceMaps {
     pub fn is_converged(&self) -> bool {
         self.working.is_none()
     }
-
-    /// Fills the buried samples of the grid at `base` of order `n` from their valid
-    /// neighbours, ring by ring (module docs); writes `filled` and `filled_error`.
-    fn fill_grid(w: &mut Working, base: usize, n: u32) {
-        let size = grid_size(n);
-        let range = base..base + size;
-        w.filled[range.clone()].copy_from_slice(&w.raw[range.clone()]);
-        w.filled_error[range.clone()].copy_from_slice(&w.std_error[range.clone()]);
-        let burial = &mut w.burial[range];
-        if burial.iter().all(|&b| b == Burial::Valid) || burial.iter().all(|&b| b != Burial::Valid)
-        {
-            return;
-        }
-        burial.iter_mut().for_each(|b| {
-            if *b != Burial::Valid {
-                *b = Burial::Buried;
-            }
-        });
-        loop {
-            let mut changed = false;
-            for d in 0..=n {
-                for j in 0..=d {
-                    let i = d - j;
-                    let m = grid_index(i, j);
-                    if burial[m] != Burial::Buried {
-                        continue;
-                    }
-                    let (mut sum, mut err, mut count) = (Vec3::ZERO, Vec3::ZERO, 0u32);
-                    let (ii, jj) = (i as i64, j as i64);
-                    for (di, dj) in [(-1, 0), (1, 0), (0, -1), (0, 1), (1, -1), (-1, 1)] {
-                        let (a, b) = (ii + di, jj + dj);
-                        if a < 0 || b < 0 || a + b > n as i64 {
-                            continue;
-                        }
-                        let k = grid_index(a as u32, b as u32);
-                        if burial[k] == Burial::Valid || burial[k] == Burial::Filled {
-                            sum += w.filled[base + k];
-                            err += w.filled_error[base + k];
-                            count += 1;
-                        }
-                    }
-                    if count > 0 {
-                        w.filled[base + m] = sum / count as f32;
-                        w.filled_error[base + m] = err / count as f32;
-                        burial[m] = Burial::FilledNow;
-                        changed = true;
-                    }
-                }
-            }
-            if !changed {
-                break;
-            }
-            burial.iter_mut().for_each(|b| {
-                if *b == Burial::FilledNow {
-                    *b = Burial::Filled;
-                }
-            });
-        }
-    }
-
-    /// The refinement test of a grid of order `n` at `base` that just doubled (or was
-    /// just made): the largest noise-corrected relative difference e between a new,
-    /// non-buried sample and the coarse interpolation there (module docs).
-    fn interpolation_error(&self, w: &Working, base: usize, n: u32) -> f32 {
-        let k = self.settings.noise_sigmas;
-        let eps = self.settings.floor;
-        let mut worst = 0.0f32;
-        for_each_new_sample(n / 2, n, |i, j, m| {
-            if w.burial[base + m] != Burial::Valid {
-                return;
-            }
-            let [[ai, aj], [bi, bj]] = coarse_neighbours(i, j);
-            let (a, b) = (base + grid_index(ai, aj), base + grid_index(bi, bj));
-            let interp = 0.5 * (w.filled[a] + w.filled[b]);
-            let sigma2 = w.std_error[base + m] * w.std_error[base + m]
-                + 0.25
-                    * (w.filled_error[a] * w.filled_error[a]
-                        + w.filled_error[b] * w.filled_error[b]);
-            let value = w.raw[base + m];
-            for c in 0..3 {
-                let excess = ((value[c] - interp[c]).abs() - k * sigma2[c].sqrt()).max(0.0);
-                if excess > 0.0 {
-                    let e = excess / (value[c].max(0.0) + eps);
-                    worst = worst.max(if e.is_nan() { f32::INFINITY } else { e });
-                }
-            }
-        });
-        worst
-    }
 }
 
 impl SurfaceCache for IrradianceMaps {
@@ -482,94 +294,14 @@ impl SurfaceCache for IrradianceMaps {
         Method::IrradianceMap
     }
 
+    /// The new samples of every grid that asks to double (or to be made): see
+    /// [`Self::ask_new_samples`].
     fn next_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>) {
-        let Some(w) = self.working.as_mut() else {
-            return;
-        };
-        w.pending.clear();
-        w.pending
-            .extend((0..w.refine.len() as u32).filter(|&g| w.refine[g as usize]));
-        if w.pending.is_empty() {
-            self.working = None;
-            return;
-        }
-        let start = points.len();
-        let w = &mut **w;
-        w.sources.clear();
-        w.round_lines.clear();
-        w.round_feet.clear();
-        let mut probed = probe_new_samples(scene, w, &self.levels).into_iter();
-        // Round point of each corner asked for in this round (only rounds that make
-        // grids have corners to share).
-        let mut corner_points = Vec::new();
-        for &g in &w.pending {
-            let (t, front) = (g / 2, g % 2 == 0);
-            let (coarse, n) = w.round_orders(g as usize, &self.levels);
-            if coarse == 0 && !w.links.is_empty() && corner_points.is_empty() {
-                corner_points = vec![u32::MAX; w.links.len()];
-            }
-            let key = scene.triangle_key(t);
-            let inv = 1.0 / n as f32;
-            let prior_base = match w.prior_offsets.get(g as usize) {
-                Some(&o) if coarse == 0 && o != u32::MAX => Some(o as usize),
-                _ => None,
-            };
-            let crossed = w.crossed[g as usize];
-            for_each_new_sample(coarse, n, |i, j, m| {
-                let mut uv = Vec2::new(i as f32 * inv, j as f32 * inv);
-                let mut line = crossings::NO_LINE;
-                let sample_key = sample_key(key, front, i, j, n);
-                if crossed {
-                    let (site, crossing, foot) = probed.next().expect("one probe per new sample");
-                    uv = site;
-                    if let Some(l) = crossing {
-                        line = self.lines.len() as u32;
-                        self.lines.push(l);
-                        w.feet.push(Vec3::NAN);
-                    }
-                    if let Some(foot) = foot {
-                        w.round_feet.push((line, (points.len() - start) as u32));
-                        points.push(SamplePoint {
-                            site: SampleSite::Surface {
-                                triangle: t,
-                                uv: foot,
-                                front,
-                            },
-                            key: splitmix64(sample_key ^ crossings::FOOT_KEY),
-                            prior: None,
-                            budget: None,
-                        });
-                    }
-                }
-                w.round_lines.push(line);
-                let corner = match (coarse, corner_of(i, j, n)) {
-                    (0, Some(k)) if !corner_points.is_empty() => Some(3 * g as usize + k),
-                    _ => None,
-                };
-                if let Some(c) = corner {
-                    let link = w.links[c];
-                    if link != UNSHARED && corner_points[link as usize] != u32::MAX {
-                        w.sources.push(corner_points[link as usize]);
-                        return;
-                    }
-                    corner_points[c] = (points.len() - start) as u32;
-                }
-                w.sources.push((points.len() - start) as u32);
-                points.push(SamplePoint {
-                    site: SampleSite::Surface {
-                        triangle: t,
-                        uv,
-                        front,
-                    },
-                    key: sample_key,
-                    prior: prior_base.map(|b| w.priors[b + m]),
-                    budget: None,
-                });
-            });
-        }
-        w.pending_points = points.len() - start;
+        self.ask_new_samples(scene, points);
     }
 
+    /// Moves the samples into the grids' new orders with the round's estimates, fills
+    /// buried samples, decides which grids double again, and packs.
     fn finish_round(
         &mut self,
         _scene: &TracedScene,
@@ -584,83 +316,15 @@ impl SurfaceCache for IrradianceMaps {
             (w.pending_points, w.pending_points),
             "finish_round needs the estimates of the points next_round asked for"
         );
-        // New layout: pending grids double (fresh ones start at their first order).
-        let slots = self.levels.len();
-        let mut new_levels = self.levels.clone();
-        for &g in &w.pending {
-            let first = w.start_log2(g as usize) + 1;
-            let l = &mut new_levels[g as usize];
-            *l = if *l == 0 { first } else { *l + 1 };
-        }
-        let mut offsets = vec![0u32; slots];
-        let mut total = 0usize;
-        for g in 0..slots {
-            offsets[g] = total as u32;
-            if new_levels[g] > 0 {
-                total += grid_size(order_of_level(new_levels[g]));
-            }
-        }
-        // Move the old samples to their places in the doubled grids.
-        let mut raw = vec![Vec3::ZERO; total];
-        let mut samples = vec![0u32; total];
-        let mut std_error = vec![Vec3::ZERO; total];
-        let mut burial = vec![Burial::Valid; total];
-        let mut line_of = vec![crossings::NO_LINE; total];
-        for g in 0..slots {
-            let (old, new) = (
-                order_of_level(self.levels[g]),
-                order_of_level(new_levels[g]),
-            );
-            if old == 0 {
-                continue;
-            }
-            let (from, to) = (self.offsets[g] as usize, offsets[g] as usize);
-            if old == new {
-                let s = grid_size(old);
-                raw[to..to + s].copy_from_slice(&w.raw[from..from + s]);
-                samples[to..to + s].copy_from_slice(&w.samples[from..from + s]);
-                std_error[to..to + s].copy_from_slice(&w.std_error[from..from + s]);
-                burial[to..to + s].copy_from_slice(&w.burial[from..from + s]);
-                line_of[to..to + s].copy_from_slice(&w.line_of[from..from + s]);
-            } else {
-                for d in 0..=old {
-                    for j in 0..=d {
-                        let i = d - j;
-                        let (a, b) = (from + grid_index(i, j), to + grid_index(2 * i, 2 * j));
-                        raw[b] = w.raw[a];
-                        samples[b] = w.samples[a];
-                        std_error[b] = w.std_error[a];
-                        line_of[b] = w.line_of[a];
-                        burial[b] = if w.burial[a] == Burial::Valid {
-                            Burial::Valid
-                        } else {
-                            Burial::Buried
-                        };
-                    }
-                }
-            }
-        }
-        // Store the new estimates, in the order next_round asked for them.
-        let threshold = self.settings.buried_threshold;
-        let mut next = 0usize;
-        for &g in &w.pending {
-            let n = order_of_level(new_levels[g as usize]);
-            let coarse = order_of_level(self.levels[g as usize]);
-            let base = offsets[g as usize] as usize;
-            for_each_new_sample(coarse, n, |_, _, m| {
-                let e = &estimates[w.sources[next] as usize];
-                line_of[base + m] = w.round_lines[next];
-                next += 1;
-                raw[base + m] = e.value;
-                samples[base + m] = e.samples;
-                std_error[base + m] = e.std_error;
-                burial[base + m] = if e.back_face_share > threshold {
-                    Burial::Buried
-                } else {
-                    Burial::Valid
-                };
-            });
-        }
+        let (new_levels, offsets, total) = grown_layout(&self.levels, &w);
+        w.regrid(&self.levels, &self.offsets, &new_levels, &offsets, total);
+        w.store_estimates(
+            &self.levels,
+            &new_levels,
+            &offsets,
+            estimates,
+            self.settings.buried_threshold,
+        );
         for &(line, point) in &w.round_feet {
             let e = &estimates[point as usize];
             w.feet[line as usize] = crossings::foot_value(e);
@@ -668,70 +332,11 @@ impl SurfaceCache for IrradianceMaps {
         estimates.iter().for_each(|e| self.totals.add(e));
         self.levels = new_levels;
         self.offsets = offsets;
-        w.raw = raw;
-        w.samples = samples;
-        w.std_error = std_error;
-        w.burial = burial;
-        w.line_of = line_of;
-        // Fill buried samples (every grid: cheap, and independent of history).
-        w.filled = vec![Vec3::ZERO; total];
-        w.filled_error = vec![Vec3::ZERO; total];
-        for g in 0..slots {
-            let n = order_of_level(self.levels[g]);
-            if n > 0 {
-                Self::fill_grid(&mut w, self.offsets[g] as usize, n);
-            }
-        }
+        self.fill_buried(&mut w, total);
         self.buried = w.burial.iter().filter(|&&b| b != Burial::Valid).count() as u64;
-        // Decide which of the grids that just doubled double again.
-        w.refine.iter_mut().for_each(|r| *r = false);
-        let bound = self.settings.interpolation_error;
-        for &g in &w.pending {
-            let n = order_of_level(self.levels[g as usize]);
-            if n < w.max_orders[g as usize / 2] {
-                let base = self.offsets[g as usize] as usize;
-                let burial = &w.burial[base..base + grid_size(n)];
-                let mixed =
-                    burial.contains(&Burial::Valid) && burial.iter().any(|&b| b != Burial::Valid);
-                // A grid buried all over needs no detail, whatever crosses it.
-                let shadow = w.shadow_edges.get(g as usize).copied().unwrap_or(false)
-                    && burial.contains(&Burial::Valid);
-                // An order-1 grid (a re-bake's prior) has no new samples to test: it
-                // doubles.
-                w.refine[g as usize] =
-                    n == 1 || mixed || shadow || self.interpolation_error(&w, base, n) > bound;
-            }
-        }
-        w.pending.clear();
-        w.pending_points = 0;
-        w.sources.clear();
-        w.round_lines.clear();
-        w.round_feet.clear();
-        // Priors serve the first round only.
-        w.priors = Vec::new();
-        w.prior_offsets = Vec::new();
-        // Pack: half floats with a scale for the largest value.
-        let max = w
-            .filled
-            .iter()
-            .chain(w.feet.iter().filter(|f| !f.is_nan()))
-            .fold(0.0f32, |m, v| m.max(v.max_element()));
-        self.scale = StoreScale::for_max(max);
-        self.packed.clear();
-        self.packed
-            .extend(w.filled.iter().map(|&v| self.scale.pack(v)));
-        self.sample_counts.clone_from(&w.samples);
-        let scale = self.scale;
-        self.feet = crossings::settle_feet(&mut self.lines, &w.feet, |f| scale.pack(f));
-        self.crossed_grids.clear();
-        self.sample_lines.clear();
-        for g in (0..slots).filter(|&g| w.crossed[g] && self.levels[g] > 0) {
-            let (base, n) = (self.offsets[g] as usize, order_of_level(self.levels[g]));
-            self.crossed_grids
-                .push([g as u32, self.sample_lines.len() as u32]);
-            self.sample_lines
-                .extend_from_slice(&w.line_of[base..base + grid_size(n)]);
-        }
+        self.decide_refinement(&mut w);
+        w.end_round();
+        self.pack(&w);
         self.working = Some(w);
     }
 
@@ -758,7 +363,7 @@ impl SurfaceCache for IrradianceMaps {
                 let first = self.crossed_grids[k][1] as usize;
                 let lines = &self.sample_lines[first..first + grid_size(n)];
                 let near = |i, j| match lines[grid_index(i, j)] {
-                    crossings::NO_LINE => value(i, j),
+                    NO_INDEX => value(i, j),
                     l => self.lines[l as usize].value(
                         uv,
                         value(i, j),
@@ -766,7 +371,7 @@ impl SurfaceCache for IrradianceMaps {
                     ),
                 };
                 grid_interpolate_kept(n, uv, near, |i, j| match lines[grid_index(i, j)] {
-                    crossings::NO_LINE => true,
+                    NO_INDEX => true,
                     l => self.lines[l as usize].on_side(uv),
                 })
             }
@@ -785,7 +390,7 @@ impl SurfaceCache for IrradianceMaps {
         let mut start_log2: Vec<u8> = (0..slots)
             .map(|g| fresh.working.as_ref().map_or(1, |w| w.start_log2(g)))
             .collect();
-        let mut prior_offsets = vec![u32::MAX; slots];
+        let mut prior_offsets = vec![NO_INDEX; slots];
         let mut priors = Vec::new();
         for g in 0..slots {
             let (t, front) = ((g / 2) as u32, g % 2 == 0);

@@ -4,10 +4,8 @@
 use super::IrradianceMaps;
 use crate::SampleSite;
 use glam::Vec2;
+use surfcache_core::index::NO_INDEX;
 use surfcache_trace::TracedScene;
-
-/// A corner without a representative (the maps' working corner links).
-pub(super) const UNSHARED: u32 = u32::MAX;
 
 /// The most representatives a vertex keeps while its triangles look for one to share
 /// with ([`corner_links`]); later triangles that match none estimate their own corner.
@@ -77,7 +75,7 @@ pub fn corner_links(scene: &TracedScene, cos_max: f32, baked: &[bool]) -> Vec<u3
             links
         })
         .collect();
-    let mut links = vec![UNSHARED; 3 * baked.len()];
+    let mut links = vec![NO_INDEX; 3 * baked.len()];
     for (corner, link) in per_instance.into_iter().flatten() {
         links[corner] = link;
     }

@@ -9,7 +9,8 @@
 //! texels still sampling improve with them (the training schedule of Müller et al.
 //! 2017). A round's guide depends only on earlier rounds, so every round stays unbiased.
 
-use super::{InstanceMap, NONE};
+use super::InstanceMap;
+use surfcache_core::index::NO_INDEX;
 use surfcache_trace::guiding::{DirectionGuide, GuideRecord};
 
 /// Side of a block in texels.
@@ -18,13 +19,13 @@ pub const BLOCK: u32 = 4;
 /// Records of all rounds so far, and the guides of the next round.
 #[derive(Debug, Default)]
 pub(super) struct TexelGuides {
-    /// Block of each texel of a layer (its index within the layer), or [`NONE`] for a
+    /// Block of each texel of a layer (its index within the layer), or [`NO_INDEX`] for a
     /// texel no triangle owns.
     block: Vec<u32>,
     /// Blocks per layer.
     layer_blocks: usize,
     records: Vec<GuideRecord>,
-    /// Per block of all layers: index into `guides`, or [`NONE`].
+    /// Per block of all layers: index into `guides`, or [`NO_INDEX`].
     block_guide: Vec<u32>,
     guides: Vec<DirectionGuide>,
 }
@@ -41,12 +42,12 @@ impl TexelGuides {
     /// Empty records for every block that holds an owned texel, on `layers` sides;
     /// record values count in units of `unit` W/m².
     pub(super) fn recording(maps: &[InstanceMap], owner: &[u32], layers: usize, unit: f32) -> Self {
-        let mut block = vec![NONE; owner.len()];
+        let mut block = vec![NO_INDEX; owner.len()];
         // Blocks are numbered densely, only where a texel is owned.
         let mut numbered = std::collections::HashMap::new();
         for (m_index, m) in maps.iter().enumerate() {
             for k in 0..m.texels() {
-                if owner[m.offset + k] == NONE {
+                if owner[m.offset + k] == NO_INDEX {
                     continue;
                 }
                 let (x, y) = (k as u32 % m.width, k as u32 / m.width);
@@ -74,7 +75,7 @@ impl TexelGuides {
             return None;
         }
         match self.block[slot % layer_texels] {
-            NONE => None,
+            NO_INDEX => None,
             b => Some((slot / layer_texels) * self.layer_blocks + b as usize),
         }
     }
@@ -99,7 +100,7 @@ impl TexelGuides {
                 wanted[b] = true;
             }
         }
-        self.block_guide = vec![NONE; self.records.len()];
+        self.block_guide = vec![NO_INDEX; self.records.len()];
         self.guides.clear();
         for (b, record) in self.records.iter().enumerate() {
             if !wanted[b] {

@@ -27,6 +27,7 @@
 
 use obvhs::cwbvh::{CwBvh, node::CwBvhNode};
 use std::{mem::MaybeUninit, sync::OnceLock};
+use surfcache_core::index::NO_INDEX;
 
 /// Barycentric slack of the triangle test: edges shared by two triangles overlap by this
 /// much instead of leaving float-precision cracks that rays slip through.
@@ -38,8 +39,8 @@ pub const LANES: usize = 8;
 /// Stack entries kept on the machine stack; deeper trees use a heap stack.
 const STACK: usize = 64;
 
-/// Slot index of padding lanes in [`Tree::slot_index`].
-pub const PADDING: u32 = u32::MAX;
+/// Slot index of padding lanes in [`Tree::slot_index`]: they hold no triangle.
+pub const PADDING: u32 = NO_INDEX;
 
 /// Eight triangles in structure-of-arrays form: `v0`, `e1 = v0 − v1`, `e2 = v2 − v0` per
 /// axis (the edge convention of obvhs' `RtTriangle`, so `u` weighs `v1` and `v` weighs `v2`).

@@ -1,0 +1,297 @@
+//! Rounds: the new samples every refining grid asks for (probed for crossings, corners
+//! shared), and how a round's estimates move into the grids' new layout.
+
+use super::{
+    IrradianceMaps, Working,
+    grid::{corner_of, for_each_new_sample, grid_index, grid_size, order_of_level, sample_key},
+};
+use crate::{
+    SamplePoint, SampleSite,
+    burial::Burial,
+    crossings::{self, SampleCrossing},
+    stored_rgb::StoreScale,
+};
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use surfcache_core::{geometry::longest_edge, index::NO_INDEX, sampling::splitmix64};
+use surfcache_trace::{Estimate, TracedScene};
+
+/// Probes the new samples of this round's crossed grids ([`crossings::probe`], as far as
+/// one spacing of the grid's maximum order, where lookups use the lines), in the order
+/// [`SurfaceCache::next_round`] visits them: each sample's site (a sample on a crossing
+/// surface moves just beyond it, as lightmap texels do) and its crossing line, oriented
+/// from the site, in barycentric coordinates.
+fn probe_new_samples(
+    scene: &TracedScene,
+    w: &Working,
+    levels: &[u8],
+) -> Vec<(Vec2, Option<SampleCrossing>, Option<Vec2>)> {
+    let mut sites = Vec::new();
+    for &g in w.pending.iter().filter(|&&g| w.crossed[g as usize]) {
+        let (coarse, n) = w.round_orders(g as usize, levels);
+        let inv = 1.0 / n as f32;
+        for_each_new_sample(coarse, n, |i, j, _| {
+            sites.push((g, Vec2::new(i as f32 * inv, j as f32 * inv)));
+        });
+    }
+    sites
+        .par_iter()
+        .map(|&(g, uv)| {
+            let (t, front) = (g / 2, g % 2 == 0);
+            let [a, b, c] = scene.positions[t as usize];
+            let reach =
+                crossings::LINE_REACH * longest_edge(a, b, c) / w.max_orders[t as usize] as f32;
+            let probe = crossings::probe(scene, t, uv, front, reach);
+            let site = probe.site(uv);
+            let kept = probe.crossing.and_then(|crossing| {
+                SampleCrossing::new(scene, t, front, &crossing, crossings::BARYCENTRIC, site)
+            });
+            (site, kept.map(|(c, _)| c), kept.and_then(|(_, foot)| foot))
+        })
+        .collect()
+}
+
+impl IrradianceMaps {
+    /// Round points for the new samples of every grid that asks to double (or to be
+    /// made), in ascending grid slot: a crossed grid's samples at their probed sites with
+    /// the feet of their lines, and a shared corner once, at its representative.
+    pub(super) fn ask_new_samples(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>) {
+        let Some(w) = self.working.as_mut() else {
+            return;
+        };
+        w.pending.clear();
+        w.pending
+            .extend((0..w.refine.len() as u32).filter(|&g| w.refine[g as usize]));
+        if w.pending.is_empty() {
+            self.working = None;
+            return;
+        }
+        let start = points.len();
+        let w = &mut **w;
+        w.sources.clear();
+        w.round_lines.clear();
+        w.round_feet.clear();
+        let mut probed = probe_new_samples(scene, w, &self.levels).into_iter();
+        // Round point of each corner asked for in this round (only rounds that make
+        // grids have corners to share).
+        let mut corner_points = Vec::new();
+        for &g in &w.pending {
+            let (t, front) = (g / 2, g % 2 == 0);
+            let (coarse, n) = w.round_orders(g as usize, &self.levels);
+            if coarse == 0 && !w.links.is_empty() && corner_points.is_empty() {
+                corner_points = vec![NO_INDEX; w.links.len()];
+            }
+            let key = scene.triangle_key(t);
+            let inv = 1.0 / n as f32;
+            let prior_base = match w.prior_offsets.get(g as usize) {
+                Some(&o) if coarse == 0 && o != NO_INDEX => Some(o as usize),
+                _ => None,
+            };
+            let crossed = w.crossed[g as usize];
+            for_each_new_sample(coarse, n, |i, j, m| {
+                let mut uv = Vec2::new(i as f32 * inv, j as f32 * inv);
+                let mut line = NO_INDEX;
+                let sample_key = sample_key(key, front, i, j, n);
+                if crossed {
+                    let (site, crossing, foot) = probed.next().expect("one probe per new sample");
+                    uv = site;
+                    if let Some(l) = crossing {
+                        line = self.lines.len() as u32;
+                        self.lines.push(l);
+                        w.feet.push(Vec3::NAN);
+                    }
+                    if let Some(foot) = foot {
+                        w.round_feet.push((line, (points.len() - start) as u32));
+                        points.push(SamplePoint {
+                            site: SampleSite::Surface {
+                                triangle: t,
+                                uv: foot,
+                                front,
+                            },
+                            key: splitmix64(sample_key ^ crossings::FOOT_KEY),
+                            prior: None,
+                            budget: None,
+                        });
+                    }
+                }
+                w.round_lines.push(line);
+                let corner = match (coarse, corner_of(i, j, n)) {
+                    (0, Some(k)) if !corner_points.is_empty() => Some(3 * g as usize + k),
+                    _ => None,
+                };
+                if let Some(c) = corner {
+                    let link = w.links[c];
+                    if link != NO_INDEX && corner_points[link as usize] != NO_INDEX {
+                        w.sources.push(corner_points[link as usize]);
+                        return;
+                    }
+                    corner_points[c] = (points.len() - start) as u32;
+                }
+                w.sources.push((points.len() - start) as u32);
+                points.push(SamplePoint {
+                    site: SampleSite::Surface {
+                        triangle: t,
+                        uv,
+                        front,
+                    },
+                    key: sample_key,
+                    prior: prior_base.map(|b| w.priors[b + m]),
+                    budget: None,
+                });
+            });
+        }
+        w.pending_points = points.len() - start;
+    }
+
+    /// Packs the filled samples (half floats with a scale for the largest value, feet
+    /// included) and the crossed grids' lines.
+    pub(super) fn pack(&mut self, w: &Working) {
+        let slots = self.levels.len();
+        // Pack: half floats with a scale for the largest value.
+        let max = w
+            .filled
+            .iter()
+            .chain(w.feet.iter().filter(|f| !f.is_nan()))
+            .fold(0.0f32, |m, v| m.max(v.max_element()));
+        self.scale = StoreScale::for_max(max);
+        self.packed.clear();
+        self.packed
+            .extend(w.filled.iter().map(|&v| self.scale.pack(v)));
+        self.sample_counts.clone_from(&w.samples);
+        let scale = self.scale;
+        self.feet = crossings::settle_feet(&mut self.lines, &w.feet, |f| scale.pack(f));
+        self.crossed_grids.clear();
+        self.sample_lines.clear();
+        for g in (0..slots).filter(|&g| w.crossed[g] && self.levels[g] > 0) {
+            let (base, n) = (self.offsets[g] as usize, order_of_level(self.levels[g]));
+            self.crossed_grids
+                .push([g as u32, self.sample_lines.len() as u32]);
+            self.sample_lines
+                .extend_from_slice(&w.line_of[base..base + grid_size(n)]);
+        }
+    }
+}
+
+/// The grids' layout after a round: pending grids double (fresh ones start at their
+/// first order); new levels, offsets and the total number of samples.
+pub(super) fn grown_layout(levels: &[u8], w: &Working) -> (Vec<u8>, Vec<u32>, usize) {
+    let slots = levels.len();
+    let mut new_levels = levels.to_vec();
+    for &g in &w.pending {
+        let first = w.start_log2(g as usize) + 1;
+        let l = &mut new_levels[g as usize];
+        *l = if *l == 0 { first } else { *l + 1 };
+    }
+    let mut offsets = vec![0u32; slots];
+    let mut total = 0usize;
+    for g in 0..slots {
+        offsets[g] = total as u32;
+        if new_levels[g] > 0 {
+            total += grid_size(order_of_level(new_levels[g]));
+        }
+    }
+    (new_levels, offsets, total)
+}
+
+impl Working {
+    /// Moves the samples of grids of `levels` at `offsets` to their places in the
+    /// layout `new_levels`, `new_offsets` of `total` samples (a doubled grid's sample
+    /// (i, j) becomes (2i, 2j)); the new samples are left empty.
+    pub(super) fn regrid(
+        &mut self,
+        levels: &[u8],
+        offsets: &[u32],
+        new_levels: &[u8],
+        new_offsets: &[u32],
+        total: usize,
+    ) {
+        let slots = levels.len();
+        let mut raw = vec![Vec3::ZERO; total];
+        let mut samples = vec![0u32; total];
+        let mut std_error = vec![Vec3::ZERO; total];
+        let mut burial = vec![Burial::Valid; total];
+        let mut line_of = vec![NO_INDEX; total];
+        for g in 0..slots {
+            let (old, new) = (order_of_level(levels[g]), order_of_level(new_levels[g]));
+            if old == 0 {
+                continue;
+            }
+            let (from, to) = (offsets[g] as usize, new_offsets[g] as usize);
+            if old == new {
+                let s = grid_size(old);
+                raw[to..to + s].copy_from_slice(&self.raw[from..from + s]);
+                samples[to..to + s].copy_from_slice(&self.samples[from..from + s]);
+                std_error[to..to + s].copy_from_slice(&self.std_error[from..from + s]);
+                burial[to..to + s].copy_from_slice(&self.burial[from..from + s]);
+                line_of[to..to + s].copy_from_slice(&self.line_of[from..from + s]);
+            } else {
+                for d in 0..=old {
+                    for j in 0..=d {
+                        let i = d - j;
+                        let (a, b) = (from + grid_index(i, j), to + grid_index(2 * i, 2 * j));
+                        raw[b] = self.raw[a];
+                        samples[b] = self.samples[a];
+                        std_error[b] = self.std_error[a];
+                        line_of[b] = self.line_of[a];
+                        burial[b] = if self.burial[a] == Burial::Valid {
+                            Burial::Valid
+                        } else {
+                            Burial::Buried
+                        };
+                    }
+                }
+            }
+        }
+        self.raw = raw;
+        self.samples = samples;
+        self.std_error = std_error;
+        self.burial = burial;
+        self.line_of = line_of;
+    }
+
+    /// Stores the round's estimates as the new samples of the pending grids (now of
+    /// `new_levels` at `offsets`, before the round of `levels`), in the order
+    /// [`IrradianceMaps::ask_new_samples`] asked for them; a sample whose back-face
+    /// share is above `threshold` is buried.
+    pub(super) fn store_estimates(
+        &mut self,
+        levels: &[u8],
+        new_levels: &[u8],
+        offsets: &[u32],
+        estimates: &[Estimate],
+        threshold: f32,
+    ) {
+        let mut next = 0usize;
+        for &g in &self.pending {
+            let n = order_of_level(new_levels[g as usize]);
+            let coarse = order_of_level(levels[g as usize]);
+            let base = offsets[g as usize] as usize;
+            for_each_new_sample(coarse, n, |_, _, m| {
+                let e = &estimates[self.sources[next] as usize];
+                self.line_of[base + m] = self.round_lines[next];
+                next += 1;
+                self.raw[base + m] = e.value;
+                self.samples[base + m] = e.samples;
+                self.std_error[base + m] = e.std_error;
+                self.burial[base + m] = if e.back_face_share > threshold {
+                    Burial::Buried
+                } else {
+                    Burial::Valid
+                };
+            });
+        }
+    }
+
+    /// Clears what only the round that just finished needs; priors serve the first
+    /// round only.
+    pub(super) fn end_round(&mut self) {
+        self.pending.clear();
+        self.pending_points = 0;
+        self.sources.clear();
+        self.round_lines.clear();
+        self.round_feet.clear();
+        // Priors serve the first round only.
+        self.priors = Vec::new();
+        self.prior_offsets = Vec::new();
+    }
+}

@@ -1,0 +1,78 @@
+//! The state of a bake in progress: raw estimates, their errors and burial, and what the
+//! current round asked for; dropped once the maps converge.
+
+use super::grid::order_of_level;
+use crate::burial::Burial;
+use glam::Vec3;
+
+/// What only baking needs: raw estimates, their errors, burial flags, refinement state.
+/// Arrays are parallel to the stored samples.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(super) struct Working {
+    /// Maximum order per triangle.
+    pub(super) max_orders: Vec<u32>,
+    /// Whether each grid slot asks to double (or, before its first round, to be baked).
+    pub(super) refine: Vec<bool>,
+    /// Grid slots whose new samples the current round estimates, ascending.
+    pub(super) pending: Vec<u32>,
+    /// Number of points the current round asked for.
+    pub(super) pending_points: usize,
+    /// Raw estimates E, their sample counts and standard errors.
+    pub(super) raw: Vec<Vec3>,
+    pub(super) samples: Vec<u32>,
+    pub(super) std_error: Vec<Vec3>,
+    /// Values after burial filling, and their standard errors.
+    pub(super) filled: Vec<Vec3>,
+    pub(super) filled_error: Vec<Vec3>,
+    /// Burial state of every sample ([`Burial::Buried`] or [`Burial::Valid`] when estimated).
+    pub(super) burial: Vec<Burial>,
+    /// Per sample: its crossing line in [`IrradianceMaps::lines`], or
+    /// [`NO_INDEX`] (module docs, Crossings).
+    pub(super) line_of: Vec<u32>,
+    /// Grid slots another surface crosses ([`crossed_grids`]): their samples are probed.
+    pub(super) crossed: Vec<bool>,
+    /// Per new grid sample of the current round, in the order of `sources`: its line.
+    pub(super) round_lines: Vec<u32>,
+    /// Per line: the estimate at its sample's foot (NaN: none, or buried).
+    pub(super) feet: Vec<Vec3>,
+    /// This round's foot points: (line, round point).
+    pub(super) round_feet: Vec<(u32, u32)>,
+    /// Order (log2) of each grid slot's first round; empty: `min(2, n_max)` everywhere.
+    pub(super) start_log2: Vec<u8>,
+    /// Grid slots whose punctual lights' shadow boundary crosses them
+    /// ([`punctual_shadow_edges`]) or that another surface crosses ([`crossed_grids`]):
+    /// they refine to their maximum order.
+    pub(super) shadow_edges: Vec<bool>,
+    /// Corner links: `links[3·slot + k]` is `3·slot' + k'` when corner k of grid `slot`
+    /// takes the estimate of corner k' of grid `slot'`, its representative, or
+    /// [`NO_INDEX`]; empty when corners are not shared ([`corner_links`]).
+    pub(super) links: Vec<u32>,
+    /// Per new grid sample of the current round, in [`for_each_new_sample`] order over
+    /// `pending`: the round point whose estimate it takes.
+    pub(super) sources: Vec<u32>,
+    /// Re-bakes: values of the maps before an edit, grid by grid, for the first round
+    /// ([`SamplePoint::prior`]); `prior_offsets[g]` is grid slot g's first, or
+    /// [`NO_INDEX`] for a grid without one.
+    pub(super) priors: Vec<Vec3>,
+    pub(super) prior_offsets: Vec<u32>,
+}
+
+impl Working {
+    /// The order grid slot `g` has (`coarse`, 0 before its first round) and the order
+    /// this round gives it: its first order, or double.
+    pub(super) fn round_orders(&self, g: usize, levels: &[u8]) -> (u32, u32) {
+        match order_of_level(levels[g]) {
+            0 => (0, 1 << self.start_log2(g)),
+            coarse => (coarse, 2 * coarse),
+        }
+    }
+
+    /// log2 of the order grid slot `g` starts at: a re-bake's prior order, else
+    /// `min(2, n_max)`.
+    pub(super) fn start_log2(&self, g: usize) -> u8 {
+        match self.start_log2.get(g) {
+            Some(&l) => l,
+            None => (self.max_orders[g / 2] >= 2) as u8,
+        }
+    }
+}
