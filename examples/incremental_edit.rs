@@ -87,16 +87,22 @@ fn picture(scene: &TracedScene, cache: &Cache, path: &Path) {
     write_png(path, 320, 320, &pixels, auto_exposure(&pixels)).expect("write the picture");
 }
 
-/// `a` against the reference `b` at `n` random surface points of `scene` (front sides,
-/// area-weighted; the metric of `surfcache compare`).
+/// `a` against the reference `b` at `n` random surface points of `scene` in open air
+/// (front sides, area-weighted, [`TracedScene::in_open_air`]: points inside solids are
+/// filled by convention and seen by nobody; the metric of `surfcache compare`).
 fn compare_caches(scene: &TracedScene, a: &Cache, b: &Cache, n: usize) -> Comparison {
     let areas = scene.area_distribution();
     let mut rng = Rng::new(2026, 12);
     let (mut result, mut reference) = (Vec::new(), Vec::new());
-    for _ in 0..n {
+    for _ in 0..1000 * n {
+        if result.len() == n {
+            break;
+        }
         let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), true);
-        result.push((p.position, a.lookup(p.triangle, p.uv, true)));
-        reference.push((p.position, b.lookup(p.triangle, p.uv, true), None));
+        if scene.in_open_air(&p, 32, &mut rng) {
+            result.push((p.position, a.lookup(p.triangle, p.uv, true)));
+            reference.push((p.position, b.lookup(p.triangle, p.uv, true), None));
+        }
     }
     compare(&result, &reference)
 }
@@ -119,7 +125,7 @@ fn compare_near(
             break;
         }
         let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), true);
-        if p.position.distance(centre) <= radius {
+        if p.position.distance(centre) <= radius && scene.in_open_air(&p, 32, &mut rng) {
             result.push((p.position, a.lookup(p.triangle, p.uv, true)));
             reference.push((p.position, b.lookup(p.triangle, p.uv, true), None));
         }

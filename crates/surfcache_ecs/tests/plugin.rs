@@ -70,30 +70,15 @@ fn baked(world: &World) -> (Arc<TracedScene>, Arc<Cache>) {
     (r.scene.clone().unwrap(), r.cache().unwrap().clone())
 }
 
-/// Whether a front-side point lies in open air: none of 32 rays over its hemisphere meets
-/// the back of a single-sided surface. A point inside a solid (the floor under a block,
-/// a block's side inside another) sees no light; the caches fill it from its neighbours
-/// by convention (a fresh bake and a re-bake by different ones), so it is not compared.
-fn in_open_air(scene: &TracedScene, p: &SurfacePoint, rng: &mut Rng) -> bool {
-    let origin = scene.spawn_origin(p);
-    (0..32).all(|_| {
-        let d = to_world(uniform_hemisphere(rng.next_vec2()), p.geometric_normal);
-        scene.closest_hit(origin, d, f32::INFINITY).is_none_or(|h| {
-            scene.geometric_normals[h.triangle as usize].dot(d) < 0.0
-                || scene.material_of(h.triangle).double_sided
-        })
-    })
-}
-
 /// Relative RMS of `a` against `b` at area-weighted random front-side points in open air
-/// ([`in_open_air`]; the metric of `surfcache compare`, ε = 1 % of the mean).
+/// ([`TracedScene::in_open_air`]; the metric of `surfcache compare`, ε = 1 % of the mean).
 fn rel_rms(scene: &TracedScene, a: &dyn SurfaceCache, b: &dyn SurfaceCache) -> f64 {
     let areas = scene.area_distribution();
     let mut rng = Rng::new(3, 4);
     let pairs: Vec<(Vec3, Vec3)> = (0..1500)
         .filter_map(|_| {
             let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), true);
-            in_open_air(scene, &p, &mut rng).then(|| {
+            scene.in_open_air(&p, 32, &mut rng).then(|| {
                 (
                     a.lookup(p.triangle, p.uv, true),
                     b.lookup(p.triangle, p.uv, true),

@@ -9,8 +9,8 @@ use glam::{Vec2, Vec3};
 use std::{ops::Range, sync::Arc};
 use surfcache_core::{
     AlphaMode, Environment, Light, Material, Scene, SceneError,
-    geometry::{closest_point_barycentric, interpolate, triangle_area, triangle_point},
-    sampling::{Distribution1D, splitmix64, uniform_triangle},
+    geometry::{closest_point_barycentric, interpolate, to_world, triangle_area, triangle_point},
+    sampling::{Distribution1D, Rng, splitmix64, uniform_hemisphere, uniform_triangle},
 };
 
 /// FNV-1a hash of a name, mixed: the stable key of an instance.
@@ -346,6 +346,22 @@ impl TracedScene {
             }
         }
         q + p.geometric_normal * off
+    }
+
+    /// Whether `p` lies in open air: none of `rays` uniform directions over its side's
+    /// hemisphere (from its spawn origin, drawn from `rng`) meets the back of a
+    /// single-sided surface. A point inside a solid (a floor under a block) sees no light
+    /// and caches fill it from its neighbours by convention, so comparisons of two bakes
+    /// leave such points out.
+    pub fn in_open_air(&self, p: &SurfacePoint, rays: u32, rng: &mut Rng) -> bool {
+        let origin = self.spawn_origin(p);
+        (0..rays).all(|_| {
+            let d = to_world(uniform_hemisphere(rng.next_vec2()), p.geometric_normal);
+            self.closest_hit(origin, d, f32::INFINITY).is_none_or(|h| {
+                self.geometric_normals[h.triangle as usize].dot(d) < 0.0
+                    || self.material_of(h.triangle).double_sided
+            })
+        })
     }
 
     /// The surface a query point `x` with normal `n` lies on (docs/cli.md, `query`): among
