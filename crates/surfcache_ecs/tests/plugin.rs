@@ -7,18 +7,13 @@ use bevy_ecs::prelude::*;
 use glam::{Affine3A, Vec3};
 use std::{sync::Arc, time::Duration};
 use surfcache_cache::{Cache, CacheSettings, Method, SurfaceCache, bake::BakeSettings};
-use surfcache_core::{
-    Environment, Instance, Material, Mesh, Scene,
-    geometry::to_world,
-    sampling::{Rng, uniform_hemisphere},
-    scenes,
-};
+use surfcache_core::{Environment, Instance, Material, Mesh, Scene, sampling::Rng, scenes};
 use surfcache_ecs::{
     BakeConfig, BakeFinished, BakeMode, BakedSurfaceCache, BvhBuilds, EnvironmentLight,
     InstanceName, PublishedLightmaps, SurfaceMaterial, SurfcachePlugin, TracedSceneState,
     WorldTransform, spawn_scene,
 };
-use surfcache_trace::{EstimatorSettings, SurfacePoint, TracedScene};
+use surfcache_trace::{EstimatorSettings, TracedScene};
 
 const BOUND: f32 = 0.05;
 
