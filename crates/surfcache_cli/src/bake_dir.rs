@@ -335,3 +335,21 @@ pub fn read_archive(out_dir: &Path) -> Result<BakeArchive<Cache>> {
     })?;
     BakeArchive::from_bytes(&bytes).with_context(|| format!("'{}'", Untrusted::path(&path)))
 }
+
+/// Reads `OUT_DIR/cache.bin` of a bake of `scene` (named `scene_name` on the command
+/// line); fails when the bake was made from other triangles.
+pub fn read_archive_of(
+    out_dir: &Path,
+    scene: &TracedScene,
+    scene_name: &str,
+) -> Result<BakeArchive<Cache>> {
+    let archive = read_archive(out_dir)?;
+    if archive.positions != scene.positions {
+        bail!(
+            "the bake in '{}' was made from a different scene than '{}'",
+            Untrusted::path(out_dir),
+            Untrusted::name(scene_name)
+        );
+    }
+    Ok(archive)
+}

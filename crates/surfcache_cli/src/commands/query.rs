@@ -2,11 +2,11 @@
 //! alone (docs/cli.md).
 
 use crate::{
-    bake_dir::read_archive,
+    bake_dir::{read_archive, read_archive_of},
     points::{lookup_points, lookup_published, read_points, write_results},
     scene_args::{EnvArgs, LoadedWorld},
 };
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use std::path::PathBuf;
 use surfcache_cache::SurfaceCache;
 use surfcache_io::Untrusted;
@@ -32,22 +32,19 @@ pub struct QueryArgs {
 
 pub fn run(args: QueryArgs) -> Result<()> {
     let queries = read_points(&args.points)?;
-    let archive = read_archive(&args.out_dir)?;
-    let geometry = archive
-        .geometry()
-        .with_context(|| format!("'{}'", Untrusted::path(&args.out_dir)))?;
-    let values = if let Some(scene_name) = &args.published {
-        let scene = LoadedWorld::load(scene_name, &EnvArgs::default())?.traced()?;
-        if archive.positions != scene.positions {
-            bail!(
-                "the bake in '{}' was made from a different scene than '{}'",
-                Untrusted::path(&args.out_dir),
-                Untrusted::name(scene_name)
-            );
+    let values = match &args.published {
+        Some(scene_name) => {
+            let scene = LoadedWorld::load(scene_name, &EnvArgs::default())?.traced()?;
+            let archive = read_archive_of(&args.out_dir, &scene, scene_name)?;
+            lookup_published(&scene, &archive.cache.publish(&scene), &queries)
         }
-        lookup_published(&scene, &archive.cache.publish(&scene), &queries)
-    } else {
-        lookup_points(&geometry, &archive.cache, &queries)
+        None => {
+            let archive = read_archive(&args.out_dir)?;
+            let geometry = archive
+                .geometry()
+                .with_context(|| format!("'{}'", Untrusted::path(&args.out_dir)))?;
+            lookup_points(&geometry, &archive.cache, &queries)
+        }
     };
     let mut off_surface = 0;
     let rows: Vec<String> = queries

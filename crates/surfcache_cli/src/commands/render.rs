@@ -3,7 +3,7 @@
 //! order per triangle).
 
 use crate::{
-    bake_dir::read_archive,
+    bake_dir::read_archive_of,
     camera::{Camera, default_view},
     picture::{auto_exposure, heat, write_png},
     scene_args::{EnvArgs, LoadedWorld, with_threads},
@@ -79,17 +79,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let loaded = LoadedWorld::load(&args.scene, &args.env)?;
     let scene = loaded.traced()?;
     let archive = match &args.cache {
-        Some(dir) => {
-            let archive = read_archive(dir)?;
-            if archive.positions != scene.positions {
-                bail!(
-                    "the bake in '{}' was made from a different scene than '{}'",
-                    dir.display(),
-                    args.scene
-                );
-            }
-            Some(archive)
-        }
+        Some(dir) => Some(read_archive_of(dir, &scene, &args.scene)?),
         None => None,
     };
     let (lo, hi) = scene.positions.iter().flatten().fold(
