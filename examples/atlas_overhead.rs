@@ -48,13 +48,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let scene = load_scene(path)?.scene;
     let traced = TracedScene::new(&scene)?;
     let area: f64 = traced
-        .positions
+        .positions()
         .iter()
         .map(|&[a, b, c]| triangle_area(a, b, c) as f64)
         .sum();
     println!(
         "{path}: {} instances, {} triangles, {area:.1} m², {} threads",
-        traced.instance_triangles.len(),
+        traced.instance_triangles().len(),
         traced.triangle_count(),
         rayon::current_num_threads()
     );
@@ -82,7 +82,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let maps = Lightmaps::new(&traced, settings);
         let seconds = start.elapsed().as_secs_f64();
         let mut texels = 0u64;
-        for i in 0..traced.instance_triangles.len() {
+        for i in 0..traced.instance_triangles().len() {
             let [w, h] = maps.texture_size(i as u32);
             texels += w as u64 * h as u64;
         }
@@ -90,9 +90,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let charts = maps.chart_count();
         let (mut sum, mut weight, mut lo, mut hi) = (0.0f64, 0.0f64, f32::INFINITY, 0.0f32);
         for t in 0..traced.triangle_count() {
-            let [a, b, c] = traced.positions[t];
+            let [a, b, c] = traced.positions()[t];
             let area = triangle_area(a, b, c);
-            let i = traced.instance[t];
+            let i = traced.instance()[t];
             let [w, h] = maps.texture_size(i);
             let d = maps.texels_per_metre(i);
             // Triangles under a thousandth of a texel carry no texel of their own.

@@ -73,14 +73,14 @@ fn baked(world: &World) -> (Arc<TracedScene>, Arc<Cache>) {
 
 /// The default camera's view of `scene` shaded from `cache`, as a PNG.
 fn picture(scene: &TracedScene, cache: &Cache, path: &Path) {
-    let (lo, hi) = scene.positions.iter().flatten().fold(
+    let (lo, hi) = scene.positions().iter().flatten().fold(
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
     );
     let (eye, target) = default_view(lo, hi, 40.0);
     let camera = Camera::look_at(eye, target, 40.0);
     let shade = |hit: &surfcache::trace::Hit, d: Vec3, _key: u64| {
-        let front = scene.geometric_normals[hit.triangle as usize].dot(d) < 0.0;
+        let front = scene.geometric_normals()[hit.triangle as usize].dot(d) < 0.0;
         surface_radiance(scene, hit, d, cache.lookup(hit.triangle, hit.uv, front))
     };
     let pixels = render_view(scene, &camera, 320, 320, true, &shade, || {});
@@ -136,13 +136,13 @@ fn compare_near(
 /// The sphere within 3 edited-instance radii of the named instance's centre.
 fn neighbourhood(scene: &TracedScene, name: &str) -> (Vec3, f32) {
     let i = scene
-        .instance_names
+        .instance_names()
         .iter()
         .position(|n| n == name)
         .expect("the edited instance");
-    let (lo, hi) = scene.instance_triangles[i]
+    let (lo, hi) = scene.instance_triangles()[i]
         .clone()
-        .flat_map(|t| scene.positions[t as usize])
+        .flat_map(|t| scene.positions()[t as usize])
         .fold(
             (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
             |(lo, hi), p| (lo.min(p), hi.max(p)),
@@ -308,7 +308,7 @@ fn main() {
     let (mut world2, mut schedule2) = world_with(&after_scene, settings);
     let full = run_until_baked(&mut world2, &mut schedule2);
     let (scratch_scene, scratch) = baked(&world2);
-    assert_eq!(scratch_scene.positions, edited.positions);
+    assert_eq!(scratch_scene.positions(), edited.positions());
     picture(&scratch_scene, &scratch, &out.join("from_scratch.png"));
     let error = compare_caches(&edited, &incremental, &scratch, 2000);
     // The cache before the edit, looked up on the edited scene (same triangles).

@@ -339,7 +339,7 @@ fn shadow_strip_between_coarse_samples_is_caught_by_shadow_probes() {
     );
     // The shadow probes send both floor triangles to their maximum order, 64.
     assert_eq!(maps.settings().max_order_for(4.0 * 2f32.sqrt()), 64);
-    for t in scene.instance_triangles[0].clone() {
+    for t in scene.instance_triangles()[0].clone() {
         assert_eq!(maps.order(t, true), 64, "floor triangle {t} refined");
     }
     // Tolerance: the reference's 3 standard errors plus the bake's 4·C (E + ε).
@@ -636,7 +636,7 @@ fn floor_around_a_sunken_box(thresholds: [f32; 2]) -> [([f32; 2], [u64; 2]); 2] 
     }
     for &(x, n) in &points {
         let (t, _, _) = locate(&scene, x, n);
-        assert_eq!(scene.instance[t as usize], 0, "{x} is on the floor");
+        assert_eq!(scene.instance()[t as usize], 0, "{x} is on the floor");
     }
     let refs = reference(&scene, &points, 4096);
     let rel = 0.03;
@@ -824,10 +824,10 @@ fn degenerate_triangles_are_dropped_and_needles_bake_finite() {
     let rel = 0.05;
     let settings = estimator_with(rel, 64, 1024, FLOOR_FRACTION * expected.y);
     for (what, scene) in [("from file", &from_file), ("raw", &raw)] {
-        assert!(scene.geometric_normals.iter().all(|n| n.is_finite()));
+        assert!(scene.geometric_normals().iter().all(|n| n.is_finite()));
         let needles: Vec<u32> = (0..scene.triangle_count() as u32)
             .filter(|&t| {
-                let [a, b, c] = scene.positions[t as usize];
+                let [a, b, c] = scene.positions()[t as usize];
                 (b - a).cross(c - a).length() < 1e-5
             })
             .collect();
@@ -865,8 +865,8 @@ fn degenerate_triangles_are_dropped_and_needles_bake_finite() {
         let points: Vec<(Vec3, Vec3)> = needles
             .iter()
             .map(|&t| {
-                let [a, b, c] = scene.positions[t as usize];
-                ((a + b + c) / 3.0, scene.geometric_normals[t as usize])
+                let [a, b, c] = scene.positions()[t as usize];
+                ((a + b + c) / 3.0, scene.geometric_normals()[t as usize])
             })
             .collect();
         for (r, (x, _)) in reference(scene, &points, 1024).iter().zip(&points) {
@@ -1177,7 +1177,7 @@ fn bent_shading_normals_never_see_below_the_surface() {
         intensity: Vec3::splat(1e3),
     }]);
     assert!(
-        lit_from_below.normals[0]
+        lit_from_below.normals()[0]
             .iter()
             .all(|n| (*n - nu).length() < 1e-5)
     );

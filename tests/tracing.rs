@@ -64,14 +64,39 @@ fn levels() -> Vec<SimdLevel> {
         .collect()
 }
 
+/// What [`check`] forces through the SIMD levels: a BVH, or a traced scene's.
+trait Traversed {
+    fn bvh(&self) -> &Bvh;
+    fn set_simd_level(&mut self, level: SimdLevel) -> bool;
+}
+
+impl Traversed for Bvh {
+    fn bvh(&self) -> &Bvh {
+        self
+    }
+    fn set_simd_level(&mut self, level: SimdLevel) -> bool {
+        Bvh::set_simd_level(self, level)
+    }
+}
+
+impl Traversed for TracedScene {
+    fn bvh(&self) -> &Bvh {
+        TracedScene::bvh(self)
+    }
+    fn set_simd_level(&mut self, level: SimdLevel) -> bool {
+        TracedScene::set_simd_level(self, level)
+    }
+}
+
 /// [`check_level`] at every supported SIMD level, forced one by one; the levels must also
 /// return identical hits.
-fn check(bvh: &mut Bvh, tris: &[[Vec3; 3]], rays: &[(Vec3, Vec3)]) -> usize {
-    let detected = bvh.simd_level();
+fn check(traversed: &mut impl Traversed, tris: &[[Vec3; 3]], rays: &[(Vec3, Vec3)]) -> usize {
+    let detected = traversed.bvh().simd_level();
     let mut compared = usize::MAX;
     let mut answers = Vec::new();
     for level in levels() {
-        assert!(bvh.set_simd_level(level));
+        assert!(traversed.set_simd_level(level));
+        let bvh = traversed.bvh();
         assert_eq!(bvh.simd_level(), level);
         compared = compared.min(check_level(bvh, tris, rays));
         let hits: Vec<_> = rays
@@ -87,7 +112,7 @@ fn check(bvh: &mut Bvh, tris: &[[Vec3; 3]], rays: &[(Vec3, Vec3)]) -> usize {
             answers[0].0
         );
     }
-    bvh.set_simd_level(detected);
+    traversed.set_simd_level(detected);
     compared
 }
 
@@ -155,7 +180,7 @@ fn random_rays_match_brute_force() {
 #[test]
 fn grazing_rays_match_brute_force() {
     let mut scene = TracedScene::new(&scenes::cornell()).unwrap();
-    let tris = scene.positions.clone();
+    let tris = scene.positions().to_vec();
     let mut rng = Rng::new(3, 0);
     // Rays skimming the floor (y = 0) at angles down to 1e-4 rad, from just above it.
     let rays: Vec<(Vec3, Vec3)> = (0..2000)
@@ -171,14 +196,14 @@ fn grazing_rays_match_brute_force() {
             (o, Vec3::new(phi.cos(), sign * angle.sin(), phi.sin()))
         })
         .collect();
-    assert!(check(&mut scene.bvh, &tris, &rays) > 1500);
+    assert!(check(&mut scene, &tris, &rays) > 1500);
 }
 
 #[test]
 fn rays_leaving_surfaces_match_brute_force() {
     for scene in [scenes::cornell()] {
         let mut traced = TracedScene::new(&scene).unwrap();
-        let tris = traced.positions.clone();
+        let tris = traced.positions().to_vec();
         let mut rng = Rng::new(4, 0);
         let mut rays = Vec::new();
         for t in 0..traced.triangle_count() as u32 {
@@ -190,7 +215,7 @@ fn rays_leaving_surfaces_match_brute_force() {
             }
         }
         let n = rays.len();
-        assert!(check(&mut traced.bvh, &tris, &rays) > n * 9 / 10);
+        assert!(check(&mut traced, &tris, &rays) > n * 9 / 10);
     }
 }
 

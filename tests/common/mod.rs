@@ -158,7 +158,7 @@ pub fn locate(scene: &TracedScene, x: Vec3, n: Vec3) -> (u32, Vec2, bool) {
         .unwrap_or_else(|| panic!("{x} is on no surface"));
     let front = p
         .geometric_normal
-        .dot(scene.geometric_normals[p.triangle as usize])
+        .dot(scene.geometric_normals()[p.triangle as usize])
         > 0.0;
     (p.triangle, p.uv, front)
 }

@@ -84,7 +84,7 @@ fn trace(
     }
     let loaded = surfcache_io::load_scene(scene)?;
     let traced = surfcache_trace::TracedScene::new(&loaded.scene)?;
-    let positions = &traced.positions;
+    let positions = traced.positions();
 
     let device = Device::new();
     let build = Instant::now();

@@ -214,7 +214,7 @@ fn run() -> Result<Option<Figure>, String> {
     // surfcache render's view of the same bake.
     let camera = PinholeCamera::look_at(eye, target, FOV);
     let shade = |hit: &surfcache_trace::Hit, d: V3, _key: u64| {
-        let front = traced.geometric_normals[hit.triangle as usize].dot(d) < 0.0;
+        let front = traced.geometric_normals()[hit.triangle as usize].dot(d) < 0.0;
         surface_radiance(&traced, hit, d, cache.lookup(hit.triangle, hit.uv, front))
     };
     let reference = render_view(&traced, &camera, WIDTH, HEIGHT, false, &shade, || {});
@@ -230,7 +230,7 @@ fn run() -> Result<Option<Figure>, String> {
         );
         let d = camera.direction(s, WIDTH as f32 / HEIGHT as f32);
         let hit = traced.closest_hit(camera.eye, d, f32::INFINITY)?;
-        let n = traced.geometric_normals[hit.triangle as usize];
+        let n = traced.geometric_normals()[hit.triangle as usize];
         let p = camera.eye + d * hit.t;
         Some((
             (n * 64.0).round().as_ivec3(),

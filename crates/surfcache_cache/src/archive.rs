@@ -33,8 +33,8 @@ impl<C: Serialize + DeserializeOwned> BakeArchive<C> {
     /// Captures `scene`'s triangles with `cache`.
     pub fn new(scene: &TracedScene, cache: C) -> Self {
         Self {
-            positions: scene.positions.clone(),
-            normals: scene.normals.clone(),
+            positions: scene.positions().to_vec(),
+            normals: scene.normals().to_vec(),
             cache,
         }
     }

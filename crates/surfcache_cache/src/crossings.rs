@@ -69,8 +69,8 @@ impl CrossingLine {
         corners: [Vec2; 3],
         uv: Vec2,
     ) -> Option<[f32; 3]> {
-        let [a, b, c] = scene.positions[t as usize];
-        let mu = scene.geometric_normals[t as usize];
+        let [a, b, c] = scene.positions()[t as usize];
+        let mu = scene.geometric_normals()[t as usize];
         let along = mu.cross(self.normal);
         let to_uv = |x: Vec3| {
             interpolate(
@@ -247,7 +247,7 @@ pub const FOOT_KEY: u64 = 0x0f00_7000_0000_0000;
 /// How close (metres) to `triangle`'s boundary, or to a crossing surface, a point counts
 /// as on it: four spawn offsets, at least 10⁻⁴ of the longest edge.
 pub fn boundary_tolerance(scene: &TracedScene, triangle: u32) -> f32 {
-    let [a, b, c] = scene.positions[triangle as usize];
+    let [a, b, c] = scene.positions()[triangle as usize];
     let longest = longest_edge(a, b, c);
     (4.0 * scene.spawn_offset()).max(1e-4 * longest)
 }
@@ -268,7 +268,7 @@ pub fn foot(
     line: [f32; 3],
     site: Vec2,
 ) -> Option<Vec2> {
-    let [a, b, c] = scene.positions[triangle as usize];
+    let [a, b, c] = scene.positions()[triangle as usize];
     let normal = Vec2::new(line[0], line[1]);
     let metres = (normal.x * (b - a) + normal.y * (c - a)).length();
     if metres <= 0.0 {
@@ -309,7 +309,7 @@ pub fn probe(scene: &TracedScene, triangle: u32, uv: Vec2, front: bool, reach: f
     let mu = p.geometric_normal;
     let (e1, e2) = orthonormal_basis(mu);
     let same = SAME_SURFACE_DEGREES.to_radians().cos();
-    let [a, b, c] = scene.positions[triangle as usize];
+    let [a, b, c] = scene.positions()[triangle as usize];
     let off = scene.spawn_offset();
     let boundary_tolerance = boundary_tolerance(scene, triangle);
     let mut best: Option<(f32, CrossingLine)> = None;
@@ -320,7 +320,7 @@ pub fn probe(scene: &TracedScene, triangle: u32, uv: Vec2, front: bool, reach: f
         let Some(hit) = scene.closest_hit(origin, d, reach) else {
             continue;
         };
-        let n_hit = scene.geometric_normals[hit.triangle as usize];
+        let n_hit = scene.geometric_normals()[hit.triangle as usize];
         if n_hit.dot(mu).abs() >= same {
             continue;
         }
@@ -380,7 +380,7 @@ pub fn probe(scene: &TracedScene, triangle: u32, uv: Vec2, front: bool, reach: f
 /// Whether any cell of the order-`n` grid of `triangle` (on the given side) is crossed:
 /// probes from every grid point as far as one grid spacing (the longest edge over `n`).
 pub fn grid_crossed(scene: &TracedScene, triangle: u32, front: bool, n: u32) -> bool {
-    let [a, b, c] = scene.positions[triangle as usize];
+    let [a, b, c] = scene.positions()[triangle as usize];
     let longest = longest_edge(a, b, c);
     let reach = longest / n.max(1) as f32;
     let inv = 1.0 / n.max(1) as f32;

@@ -348,7 +348,7 @@ impl ChangeBound {
             .collect();
         let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
         for &t in &changed {
-            for p in scene.positions[t as usize] {
+            for p in scene.positions()[t as usize] {
                 (lo, hi) = (lo.min(p), hi.max(p));
             }
         }
@@ -357,7 +357,7 @@ impl ChangeBound {
         let mut boxes =
             vec![(Vec3::splat(f32::MAX), Vec3::splat(f32::MIN), 0.0f32, 0.0f32); n * n * n];
         for &t in &changed {
-            let [a, b, c] = scene.positions[t as usize];
+            let [a, b, c] = scene.positions()[t as usize];
             let centroid = (a + b + c) / 3.0;
             let cell = ((centroid - lo) / extent * n as f32)
                 .as_uvec3()

@@ -219,20 +219,20 @@ pub fn triangle_map(
     instance_map: &[Option<u32>],
 ) -> Vec<u32> {
     let mut map = vec![UNMAPPED; new.triangle_count()];
-    for (i_new, range) in new.instance_triangles.iter().enumerate() {
+    for (i_new, range) in new.instance_triangles().iter().enumerate() {
         let Some(i_old) = instance_map.get(i_new).copied().flatten() else {
             continue;
         };
-        let Some(old_range) = old.instance_triangles.get(i_old as usize) else {
+        let Some(old_range) = old.instance_triangles().get(i_old as usize) else {
             continue;
         };
         // Local triangle → old traced triangle (degenerate ones may be missing).
         let mut by_local = std::collections::HashMap::with_capacity(old_range.len());
         for t in old_range.clone() {
-            by_local.insert(old.local_triangle[t as usize], t);
+            by_local.insert(old.local_triangle()[t as usize], t);
         }
         for t in range.clone() {
-            if let Some(&t_old) = by_local.get(&new.local_triangle[t as usize]) {
+            if let Some(&t_old) = by_local.get(&new.local_triangle()[t as usize]) {
                 map[t as usize] = t_old;
             }
         }

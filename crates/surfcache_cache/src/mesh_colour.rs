@@ -85,8 +85,8 @@ pub fn mesh_corner_order(uv: [Vec2; 3], mirrored: bool) -> [Vec2; 3] {
 /// one more than the largest mesh index among its traced triangles (triangles the tracer
 /// dropped as degenerate at the very end of a mesh are not seen).
 pub fn mesh_triangle_count(scene: &TracedScene, instance: u32) -> usize {
-    let range = scene.instance_triangles[instance as usize].clone();
-    scene.local_triangle[range.start as usize..range.end as usize]
+    let range = scene.instance_triangles()[instance as usize].clone();
+    scene.local_triangle()[range.start as usize..range.end as usize]
         .iter()
         .map(|&l| l as usize + 1)
         .max()
@@ -104,7 +104,7 @@ pub fn instance_texture(
     order: impl Fn(u32) -> u32,
     value: impl Fn(u32, u32, u32) -> Vec3,
 ) -> IrradianceTexture {
-    let range = scene.instance_triangles[instance as usize].clone();
+    let range = scene.instance_triangles()[instance as usize].clone();
     let orders: Vec<u32> = range.clone().map(|t| order(t).max(1)).collect();
     let sizes: Vec<[u32; 2]> = orders
         .iter()
@@ -114,7 +114,7 @@ pub fn instance_texture(
     let (width, height) = (layout.width, layout.height);
     let mut texels = vec![Vec3::ZERO; width as usize * height as usize];
     let mut uv1 = vec![[Vec2::ZERO; 3]; mesh_triangle_count(scene, instance)];
-    let mirrored = scene.mirrored[instance as usize];
+    let mirrored = scene.mirrored()[instance as usize];
     for (k, t) in range.enumerate() {
         let n = orders[k];
         let [x0, y0] = layout.origins[k];
@@ -126,11 +126,11 @@ pub fn instance_texture(
             }
         }
         let corners = corner_uv1(n, [x0, y0], [width, height]);
-        uv1[scene.local_triangle[t as usize] as usize] = mesh_corner_order(corners, mirrored);
+        uv1[scene.local_triangle()[t as usize] as usize] = mesh_corner_order(corners, mirrored);
     }
     IrradianceTexture {
         instance,
-        name: scene.instance_names[instance as usize].clone(),
+        name: scene.instance_names()[instance as usize].clone(),
         front,
         width,
         height,
@@ -151,8 +151,8 @@ pub fn publish_all(
     value: impl Fn(u32, bool, u32, u32) -> Vec3,
 ) -> Vec<IrradianceTexture> {
     let mut out = Vec::new();
-    for instance in 0..scene.instance_triangles.len() as u32 {
-        let range = scene.instance_triangles[instance as usize].clone();
+    for instance in 0..scene.instance_triangles().len() as u32 {
+        let range = scene.instance_triangles()[instance as usize].clone();
         let double_sided = !range.is_empty() && scene.material_of(range.start).double_sided;
         for front in [true, false] {
             if front || double_sided {

@@ -56,7 +56,7 @@ impl<'a> PublishedLookup<'a> {
     /// An index over `textures`, as [`crate::SurfaceCache::publish`] returns them for
     /// `scene`.
     pub fn new(textures: &'a [IrradianceTexture], scene: &'a TracedScene) -> Self {
-        let mut sides = vec![[None; 2]; scene.instance_names.len()];
+        let mut sides = vec![[None; 2]; scene.instance_names().len()];
         for (k, t) in textures.iter().enumerate() {
             if let Some(s) = sides.get_mut(t.instance as usize) {
                 s[usize::from(!t.front)] = Some(k);
@@ -74,12 +74,12 @@ impl<'a> PublishedLookup<'a> {
     /// texture on both sides, as an engine does. `None` where nothing was published.
     pub fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Option<Vec3> {
         let t = triangle as usize;
-        let instance = *self.scene.instance.get(t)? as usize;
+        let instance = *self.scene.instance().get(t)? as usize;
         let [f, b] = *self.sides.get(instance)?;
         let texture = &self.textures[if front { f? } else { b.or(f)? }];
-        let [p0, p1, p2] = *texture.uv1.get(self.scene.local_triangle[t] as usize)?;
+        let [p0, p1, p2] = *texture.uv1.get(self.scene.local_triangle()[t] as usize)?;
         // Traced corners B and C are the mesh's C and B under a mirroring transform.
-        let (p1, p2) = if self.scene.mirrored[instance] {
+        let (p1, p2) = if self.scene.mirrored()[instance] {
             (p2, p1)
         } else {
             (p1, p2)

@@ -91,9 +91,9 @@ impl VertexLighting {
         let mut corners = vec![[0u32; 3]; scene.triangle_count()];
         let mut next = 0u32;
         let mut map: Vec<u32> = Vec::new();
-        for range in &scene.instance_triangles {
+        for range in scene.instance_triangles() {
             let (lo, hi) = (range.start as usize, range.end as usize);
-            let largest = scene.vertex_indices[lo..hi]
+            let largest = scene.vertex_indices()[lo..hi]
                 .iter()
                 .flatten()
                 .max()
@@ -102,7 +102,7 @@ impl VertexLighting {
             map.resize(largest, NO_INDEX);
             for (ids, vertices) in corners[lo..hi]
                 .iter_mut()
-                .zip(&scene.vertex_indices[lo..hi])
+                .zip(&scene.vertex_indices()[lo..hi])
             {
                 for (id, &v) in ids.iter_mut().zip(vertices) {
                     let slot = &mut map[v as usize];
@@ -165,8 +165,8 @@ impl SurfaceCache for VertexLighting {
                 }
                 next += 1;
                 let t = t as u32;
-                let instance_key = scene.instance_keys[scene.instance[t as usize] as usize];
-                let vertex = scene.vertex_indices[t as usize][k];
+                let instance_key = scene.instance_keys()[scene.instance()[t as usize] as usize];
+                let vertex = scene.vertex_indices()[t as usize][k];
                 for front in [true, false] {
                     if front || self.bakes_back(scene, t) {
                         points.push(SamplePoint {
@@ -243,8 +243,8 @@ impl SurfaceCache for VertexLighting {
             }
             for (k, &id) in ids.iter().enumerate() {
                 // The same mesh vertex; its corner slot may differ if mirroring changed.
-                let vertex = new.vertex_indices[t][k];
-                let Some(k_old) = old.vertex_indices[t_old as usize]
+                let vertex = new.vertex_indices()[t][k];
+                let Some(k_old) = old.vertex_indices()[t_old as usize]
                     .iter()
                     .position(|&v| v == vertex)
                 else {

@@ -170,7 +170,7 @@ fn triangles_within_one_sample_spacing_keep_order_one_grids() {
     assert_eq!(stats.cache_bytes, STORED_RGB_BYTES * 12 + 5 * 4 + 4);
     let mut rng = Points(9);
     for t in 0..2u32 {
-        let [a, b, c] = traced.positions[t as usize];
+        let [a, b, c] = traced.positions()[t as usize];
         for front in [true, false] {
             assert_eq!(maps.order(t, front), 1);
             for _ in 0..50 {
@@ -297,7 +297,7 @@ fn refinement_keeps_every_sample_and_asks_only_for_new_ones() {
     let scale = StoreScale::for_max(5.0);
     for t in 0..2u32 {
         let n = maps.order(t, true);
-        let [a, b, c] = traced.positions[t as usize];
+        let [a, b, c] = traced.positions()[t as usize];
         for d in 0..=n {
             for j in 0..=d {
                 let uv = Vec2::new((d - j) as f32, j as f32) / n as f32;
@@ -341,7 +341,7 @@ fn buried_samples_are_filled_from_neighbours_and_counted() {
     let n = 64;
     let floor_buried: u64 = (0..2)
         .map(|t| {
-            let [a, b, c] = traced.positions[t];
+            let [a, b, c] = traced.positions()[t];
             (0..=n)
                 .flat_map(|d| (0..=d).map(move |j| (d - j, j)))
                 .filter(|&(i, j)| {
@@ -430,7 +430,7 @@ fn vertex_lighting_estimates_each_mesh_vertex_once_per_side() {
     // E is linear in position here, so barycentric interpolation is exact.
     let mut rng = Points(3);
     for t in 0..16u32 {
-        let [a, b, c] = traced.positions[t as usize];
+        let [a, b, c] = traced.positions()[t as usize];
         for _ in 0..20 {
             let uv = rng.barycentrics();
             let p = a * (1.0 - uv.x - uv.y) + b * uv.x + c * uv.y;
@@ -505,7 +505,10 @@ fn corner_values(maps: &IrradianceMaps, traced: &TracedScene) -> Vec<(Vec3, Vec3
     let mut out = Vec::new();
     for t in 0..traced.triangle_count() as u32 {
         for (k, (i, j)) in [(0, 0), (1, 0), (0, 1)].into_iter().enumerate() {
-            out.push((traced.positions[t as usize][k], maps.sample(t, true, i, j)));
+            out.push((
+                traced.positions()[t as usize][k],
+                maps.sample(t, true, i, j),
+            ));
         }
     }
     out
@@ -596,7 +599,7 @@ fn creases_and_walls_keep_corners_apart() {
     // (4 vertices, shared between them).
     assert_eq!(points, 6 + 2 + 4);
     // The floor's grids left and right of the wall keep different corner values there.
-    let floor = traced.instance_triangles[0].clone();
+    let floor = traced.instance_triangles()[0].clone();
     let values: Vec<_> = corner_values(&maps, &traced)
         .into_iter()
         .filter(|(p, _)| p.x == 1.0 && p.y == 0.0)

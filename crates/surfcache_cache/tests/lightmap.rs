@@ -142,7 +142,7 @@ fn light_tight_box_stays_black_near_its_walls() {
         let mut inward = Vec3::ZERO;
         inward[axis] = if side == 0 { 1.0 } else { -1.0 };
         let s = traced.locate(p, inward).expect("on the box");
-        let front = traced.geometric_normals[s.triangle as usize].dot(inward) > 0.0;
+        let front = traced.geometric_normals()[s.triangle as usize].dot(inward) > 0.0;
         assert!(front, "inner walls face inwards");
         let inside = cache.lookup(s.triangle, s.uv, true);
         assert_eq!(inside, Vec3::ZERO, "light leaked at {p}");
@@ -216,13 +216,13 @@ fn floor_next_to_box(buried_threshold: f32) -> (f32, f32, u64) {
     for (q, r) in queries.iter().zip(reference) {
         let r = r.expect("on the floor");
         let s = traced.locate(q.position, q.normal).unwrap();
-        assert_eq!(traced.instance[s.triangle as usize], 0, "floor");
+        assert_eq!(traced.instance()[s.triangle as usize], 0, "floor");
         // Reference noise (3 se) and the bake's error bound (3 C).
         let tol = 3.0 * r.std_error.y + 3.0 * 0.02 * r.value.y;
         let margin = |e: Vec3| (e.y - r.value.y + tol) / r.value.y;
         worst = worst.min(margin(cache.lookup(s.triangle, s.uv, true)));
         // What an engine sees: the published texture's plain bilinear at the UV1.
-        let [a, b, c] = floor.uv1[traced.local_triangle[s.triangle as usize] as usize];
+        let [a, b, c] = floor.uv1[traced.local_triangle()[s.triangle as usize] as usize];
         let at = a * (1.0 - s.uv.x - s.uv.y) + b * s.uv.x + c * s.uv.y;
         worst_published = worst_published.min(margin(floor.sample(at)));
     }
@@ -284,7 +284,7 @@ fn texcoord_1_is_used_as_given() {
         ),
     ];
     let traced = scene(instances, Vec3::ONE);
-    assert!(traced.mirrored[1]);
+    assert!(traced.mirrored()[1]);
     let cache = Lightmaps::new(&traced, settings(16.0));
     // World area 2 m², UV1 area 0.4: side √5 · 16 = 35.8, rounded up to 36.
     assert_eq!(cache.texture_size(0), [36, 36]);
@@ -306,16 +306,16 @@ fn texcoord_1_is_used_as_given() {
     // lookup is the published texture sampled at the mesh's UV1: what an engine sees.
     let mut rng = Rng::new(9, 9);
     for t in 0..traced.triangle_count() as u32 {
-        let i = traced.instance[t as usize] as usize;
+        let i = traced.instance()[t as usize] as usize;
         let tex = &textures[i];
-        let local = traced.local_triangle[t as usize] as usize;
+        let local = traced.local_triangle()[t as usize] as usize;
         for _ in 0..50 {
             let mut uv = rng.next_vec2();
             if uv.x + uv.y > 1.0 {
                 uv = Vec2::ONE - uv;
             }
             // Traced corners are the mesh's (A, C, B) under mirroring.
-            let mesh_uv = if traced.mirrored[i] {
+            let mesh_uv = if traced.mirrored()[i] {
                 Vec2::new(uv.y, uv.x)
             } else {
                 uv
@@ -323,7 +323,7 @@ fn texcoord_1_is_used_as_given() {
             let [a, b, c] = tex.uv1[local];
             let at = a * (1.0 - mesh_uv.x - mesh_uv.y) + b * mesh_uv.x + c * mesh_uv.y;
             let (got, seen) = (cache.lookup(t, uv, true), tex.sample(at));
-            if traced.mirrored[i] {
+            if traced.mirrored()[i] {
                 // Barycentrics summed in another order: rounding only.
                 assert!((got - seen).abs().max_element() <= 1e-6 * seen.max_element());
             } else {
@@ -487,17 +487,17 @@ fn generated_charts_do_not_overlap_and_cover_every_triangle() {
         };
         let cache = Lightmaps::new(&traced, settings);
         assert_eq!(cache.texels_per_metre(1), density);
-        for inst in 0..traced.instance_triangles.len() {
+        for inst in 0..traced.instance_triangles().len() {
             let [w, h] = cache.texture_size(inst as u32);
             assert!(w % 4 == 0 && h % 4 == 0);
-            let range = traced.instance_triangles[inst].clone();
+            let range = traced.instance_triangles()[inst].clone();
             let tris: Vec<[Vec3; 3]> = range
                 .clone()
-                .map(|t| traced.positions[t as usize])
+                .map(|t| traced.positions()[t as usize])
                 .collect();
             let normals: Vec<Vec3> = range
                 .clone()
-                .map(|t| traced.geometric_normals[t as usize])
+                .map(|t| traced.geometric_normals()[t as usize])
                 .collect();
             // The layout `Lightmaps` made, made again: the same.
             let atlas = generate_atlas(&tris, &normals, density, gutter, settings.max_size);
@@ -601,7 +601,7 @@ fn generated_charts_do_not_overlap_and_cover_every_triangle() {
                 assert!(
                     (owned as f32) < 1.5 * ideal,
                     "{}: {owned} texels for {ideal}",
-                    traced.instance_names[inst]
+                    traced.instance_names()[inst]
                 );
             }
             // No point at a quarter-texel pitch lies inside two triangles.

@@ -285,7 +285,7 @@ fn refinement_follows_the_shadow_edge_only() {
     let (lo, hi) = (Vec2::splat(1.1), Vec2::splat(2.9));
     let scene = shadow_scene(tiled_floor(4.0, 16), lo, hi);
     let traced = TracedScene::new(&scene).unwrap();
-    let floor_triangles = traced.instance_triangles[0].clone();
+    let floor_triangles = traced.instance_triangles()[0].clone();
     let settings = estimator(Sampler::Best, 0.05, 16, 64, 0.03);
     let maps = IrradianceMaps::new(
         &traced,
@@ -300,7 +300,7 @@ fn refinement_follows_the_shadow_edge_only() {
     let shadowed = |p: Vec3| p.x > lo.x && p.x < hi.x && p.z > lo.y && p.z < hi.y;
     let (mut edge, mut calm) = (0, 0);
     for t in floor_triangles {
-        let [a, b, c] = traced.positions[t as usize];
+        let [a, b, c] = traced.positions()[t as usize];
         let at = |u: f32, v: f32| a * (1.0 - u - v) + b * u + c * v;
         // Lit and shadowed among the order-2 samples: the generator sees the edge.
         let grid2: Vec<bool> = [

@@ -103,14 +103,14 @@ fn check_textures(
         assert!(!tex.uses_mesh_uv1);
         assert_eq!(tex.uv_rect, [0.0, 0.0, 1.0, 1.0]);
         assert_eq!(tex.texels.len(), (tex.width * tex.height) as usize);
-        for t in traced.instance_triangles[tex.instance as usize].clone() {
-            let l = traced.local_triangle[t as usize] as usize;
+        for t in traced.instance_triangles()[tex.instance as usize].clone() {
+            let l = traced.local_triangle()[t as usize] as usize;
             // The mesh triangle's corners in world space, in mesh order.
             let m = inst.mesh.indices[l].map(|i| {
                 inst.transform
                     .transform_point3(inst.mesh.positions[i as usize])
             });
-            let [a, b, c] = traced.positions[t as usize];
+            let [a, b, c] = traced.positions()[t as usize];
             let mut uvs: Vec<Vec2> = (0..200).map(|_| rng.barycentrics()).collect();
             uvs.extend(extra_points(t, tex.front));
             for uv in uvs {
@@ -138,7 +138,7 @@ fn check_textures(
 fn irradiance_map_textures_reproduce_lookup() {
     let scene = scene();
     let traced = TracedScene::new(&scene).unwrap();
-    assert!(traced.mirrored[1] && !traced.mirrored[0]);
+    assert!(traced.mirrored()[1] && !traced.mirrored()[0]);
     let settings = IrradianceMapSettings {
         density: 40.0,
         max_order: 16,
@@ -210,7 +210,7 @@ fn vertex_lighting_textures_reproduce_lookup_exactly() {
     assert_eq!(textures.len(), 4);
     for tex in &textures {
         // 2×2 texels per triangle.
-        let blocks = traced.instance_triangles[tex.instance as usize].len() as u32;
+        let blocks = traced.instance_triangles()[tex.instance as usize].len() as u32;
         assert!(tex.width * tex.height >= 4 * blocks);
     }
     let corners = |_, _| vec![Vec2::ZERO, Vec2::X, Vec2::Y];

@@ -278,11 +278,11 @@ pub fn write_lightmaps(
     textures: &[IrradianceTexture],
 ) -> Result<Value> {
     let scene = &loaded.scene;
-    if scene.instances.len() != traced.instance_names.len()
+    if scene.instances.len() != traced.instance_names().len()
         || scene
             .instances
             .iter()
-            .zip(&traced.instance_names)
+            .zip(traced.instance_names())
             .any(|(i, n)| &i.name != n)
     {
         bail!("internal error: the traced scene's instances differ from the loaded scene's");
@@ -344,7 +344,7 @@ pub fn read_archive_of(
     scene_name: &str,
 ) -> Result<BakeArchive<Cache>> {
     let archive = read_archive(out_dir)?;
-    if archive.positions != scene.positions {
+    if archive.positions != scene.positions() {
         bail!(
             "the bake in '{}' was made from a different scene than '{}'",
             Untrusted::path(out_dir),

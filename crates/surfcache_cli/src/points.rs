@@ -46,7 +46,7 @@ fn locate_points(
         .map(|q| {
             let p = geometry.locate(q.position, q.normal)?;
             let front =
-                geometry.geometric_normals[p.triangle as usize].dot(p.geometric_normal) > 0.0;
+                geometry.geometric_normals()[p.triangle as usize].dot(p.geometric_normal) > 0.0;
             look(&p, front)
         })
         .collect()

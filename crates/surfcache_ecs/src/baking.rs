@@ -335,9 +335,9 @@ fn changed_region(
             if !changed.contains(e) {
                 continue;
             }
-            for t in scene.instance_triangles[k].clone() {
+            for t in scene.instance_triangles()[k].clone() {
                 triangles += 1;
-                for p in scene.positions[t as usize] {
+                for p in scene.positions()[t as usize] {
                     lo = lo.min(p);
                     hi = hi.max(p);
                 }

@@ -167,7 +167,12 @@ fn check_edit(method: Method, case: &EditCase) {
     let (mut w2, mut s2, _) = world_with(&after, config(method));
     bake(&mut w2, &mut s2);
     let (scratch_scene, scratch) = baked(&w2);
-    assert_eq!(scratch_scene.positions, scene.positions, "{}", case.name);
+    assert_eq!(
+        scratch_scene.positions(),
+        scene.positions(),
+        "{}",
+        case.name
+    );
     let err = rel_rms(&scene, incremental.as_ref(), scratch.as_ref());
     eprintln!(
         "{} / {}: incremental vs scratch rel_rms {err:.4}",
@@ -307,7 +312,7 @@ fn edit_during_a_bake_never_publishes_the_old_scene() {
     let (mut w2, mut s2, _) = world_with(&after, config(Method::Lightmap));
     bake(&mut w2, &mut s2);
     let (scratch_scene, scratch) = baked(&w2);
-    assert_eq!(scene.positions, scratch_scene.positions);
+    assert_eq!(scene.positions(), scratch_scene.positions());
     assert_eq!(cache.publish(&scene), scratch.publish(&scratch_scene));
 }
 
@@ -481,13 +486,13 @@ fn bvh_builds_skip_superseded_snapshots_and_end_on_the_newest() {
     }
     // Instance order follows the entities; compare each instance's triangles by name.
     let by_name = |s: &TracedScene| {
-        let mut triangles: Vec<(String, Vec<[Vec3; 3]>)> = (0..s.instance_names.len())
+        let mut triangles: Vec<(String, Vec<[Vec3; 3]>)> = (0..s.instance_names().len())
             .map(|k| {
-                let positions = s.instance_triangles[k]
+                let positions = s.instance_triangles()[k]
                     .clone()
-                    .map(|t| s.positions[t as usize])
+                    .map(|t| s.positions()[t as usize])
                     .collect();
-                (s.instance_names[k].clone(), positions)
+                (s.instance_names()[k].clone(), positions)
             })
             .collect();
         triangles.sort_by(|a, b| a.0.cmp(&b.0));

@@ -471,8 +471,8 @@ pub fn estimate_change(
     if let Some(cone) = focus
         && cone.below(new.point.geometric_normal)
         && cone.below(old.point.geometric_normal)
-        && new.scene.lights.is_empty()
-        && old.scene.lights.is_empty()
+        && new.scene.lights().is_empty()
+        && old.scene.lights().is_empty()
     {
         return unchanged(prior, settings);
     }

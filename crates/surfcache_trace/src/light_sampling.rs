@@ -54,7 +54,7 @@ impl LightSampler {
             if !m.is_emissive() {
                 continue;
             }
-            let [a, b, c] = scene.positions[t as usize];
+            let [a, b, c] = scene.positions()[t as usize];
             let area = triangle_area(a, b, c);
             let sides = if m.double_sided { 2.0 } else { 1.0 };
             emitter_slot[t as usize] = emitters.len() as u32;
@@ -62,7 +62,7 @@ impl LightSampler {
             emitter_area.push(area);
             power.push(core::f32::consts::PI * area * luminance(m.emission) * sides);
         }
-        let env = &scene.environment;
+        let env = scene.environment();
         let environment = match &env.map {
             Some(map) if !env.is_black() => Some(EnvironmentSampler::new(map)),
             // A uniform sky is sampled perfectly by cosine-weighted directions already.
@@ -117,14 +117,14 @@ impl LightSampler {
             return Some(LightSample {
                 direction,
                 distance: f32::INFINITY,
-                radiance: scene.environment.radiance(direction),
+                radiance: scene.environment().radiance(direction),
                 pdf: pdf * self.p_environment,
             });
         }
         let select = (select - self.p_environment) / (1.0 - self.p_environment);
         let (k, p_choice, _) = self.emitter_distribution.sample(select);
         let t = self.emitters[k];
-        let [a, b, c] = scene.positions[t as usize];
+        let [a, b, c] = scene.positions()[t as usize];
         let uv = uniform_triangle(u);
         let y = triangle_point(a, b, c, uv);
         let to_light = y - x;
@@ -134,7 +134,7 @@ impl LightSampler {
         }
         let distance = d2.sqrt();
         let direction = to_light / distance;
-        let mu = scene.geometric_normals[t as usize];
+        let mu = scene.geometric_normals()[t as usize];
         let cos_light = mu.dot(direction);
         if cos_light == 0.0 {
             return None;
@@ -143,9 +143,9 @@ impl LightSampler {
         let front = cos_light < 0.0;
         let material = scene.material_of(t);
         let uv0 = interpolate(
-            scene.uv0[t as usize][0],
-            scene.uv0[t as usize][1],
-            scene.uv0[t as usize][2],
+            scene.uv0()[t as usize][0],
+            scene.uv0()[t as usize][1],
+            scene.uv0()[t as usize][2],
             uv,
         );
         let radiance = material.emission_at(uv0, front);
@@ -171,7 +171,7 @@ impl LightSampler {
             return 0.0;
         }
         let k = k as usize;
-        let cos_light = scene.geometric_normals[t as usize].dot(w).abs();
+        let cos_light = scene.geometric_normals()[t as usize].dot(w).abs();
         if cos_light == 0.0 {
             return 0.0;
         }

@@ -74,7 +74,7 @@ impl TracedScene {
     /// shadow rays traced to `rays`.
     pub fn punctual_irradiance_from(&self, p: &SurfacePoint, origin: Vec3, rays: &mut u32) -> Vec3 {
         let mut e = Vec3::ZERO;
-        for light in &self.lights {
+        for light in self.lights() {
             let (to_light, distance, arriving) = match *light {
                 Light::Directional {
                     direction,
@@ -152,7 +152,7 @@ impl TracedScene {
         other_pdf: impl Fn(f32, Vec3) -> Option<f32>,
     ) -> Vec3 {
         // Sampled as seen from the ray origin, so the shadow ray ends exactly on the light.
-        let Some(ls) = self.light_sampler.sample(self, origin, select, u) else {
+        let Some(ls) = self.light_sampler().sample(self, origin, select, u) else {
             return Vec3::ZERO;
         };
         let cos = p.shading_normal.dot(ls.direction);
@@ -205,7 +205,7 @@ impl TracedScene {
         options: PathOptions,
         gather: Option<&dyn IrradianceLookup>,
     ) -> PathSample {
-        let nee = options.next_event && !self.light_sampler.is_empty();
+        let nee = options.next_event && !self.light_sampler().is_empty();
         let mut radiance = Vec3::ZERO;
         let mut throughput = Vec3::ONE;
         let (mut o, mut d) = (origin, direction);
@@ -218,15 +218,15 @@ impl TracedScene {
             let Some(hit) = self.closest_hit(o, d, f32::INFINITY) else {
                 let mut weight = 1.0;
                 if let Some(p_bsdf) = pdf {
-                    weight = power_heuristic(p_bsdf, self.light_sampler.pdf_environment(d));
+                    weight = power_heuristic(p_bsdf, self.light_sampler().pdf_environment(d));
                 }
-                radiance += throughput * self.environment.radiance(d) * weight;
+                radiance += throughput * self.environment().radiance(d) * weight;
                 first_hit.get_or_insert(FirstHit::Miss);
                 break;
             };
             let t = hit.triangle;
             let material = self.material_of(t);
-            let front = self.geometric_normals[t as usize].dot(d) < 0.0;
+            let front = self.geometric_normals()[t as usize].dot(d) < 0.0;
             first_hit.get_or_insert(if front || material.double_sided {
                 FirstHit::Front
             } else {
@@ -238,7 +238,7 @@ impl TracedScene {
             if emitted != Vec3::ZERO {
                 let mut weight = 1.0;
                 if let Some(p_bsdf) = pdf {
-                    let p_light = self.light_sampler.pdf_emitter(self, t, o, p.position, d);
+                    let p_light = self.light_sampler().pdf_emitter(self, t, o, p.position, d);
                     weight = power_heuristic(p_bsdf, p_light);
                 }
                 radiance += throughput * emitted * weight;
@@ -256,7 +256,7 @@ impl TracedScene {
             }
             let spawn = self.spawn_origin(&p);
             let reflect = throughput * albedo * core::f32::consts::FRAC_1_PI;
-            if !self.lights.is_empty() {
+            if !self.lights().is_empty() {
                 radiance += reflect * self.punctual_irradiance_from(&p, spawn, &mut rays);
             }
             if nee {

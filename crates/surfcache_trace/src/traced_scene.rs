@@ -2,13 +2,13 @@
 //! what the path tracer and every surface cache read.
 
 use crate::{
-    bvh::{Bvh, Hit},
+    bvh::{Bvh, Hit, SimdLevel},
     light_sampling::LightSampler,
 };
 use glam::{Vec2, Vec3};
 use std::{ops::Range, sync::Arc};
 use surfcache_core::{
-    AlphaMode, Environment, Light, Material, Scene, SceneError,
+    AlphaMode, Environment, Instance, Light, Material, Scene, SceneError,
     geometry::{closest_point_barycentric, interpolate, to_world, triangle_area, triangle_point},
     sampling::{Distribution1D, Rng, splitmix64, uniform_hemisphere, uniform_triangle},
 };
@@ -46,43 +46,49 @@ pub struct SurfacePoint {
 
 /// World-space triangles in structure-of-arrays form, their materials, the lights and
 /// environment, and the BVH over them.
+///
+/// The fields are private so that they stay consistent: every per-triangle array has
+/// [`Self::triangle_count`] entries (`uv1` has them too, or none when no mesh has
+/// TEXCOORD_1), every per-instance array one entry per instance, the BVH is built over
+/// `positions`, and the light sampler is collected from `materials` and `environment`.
+/// [`Self::new`] is the only constructor; the accessors below read the arrays.
 pub struct TracedScene {
-    pub bvh: Bvh,
+    bvh: Bvh,
     /// Corner positions per triangle (front face counter-clockwise, even under mirroring).
-    pub positions: Vec<[Vec3; 3]>,
+    positions: Vec<[Vec3; 3]>,
     /// Corner shading normals μ_A, μ_B, μ_C per triangle (world space, unit).
-    pub normals: Vec<[Vec3; 3]>,
+    normals: Vec<[Vec3; 3]>,
     /// Unit front-face geometric normal per triangle.
-    pub geometric_normals: Vec<Vec3>,
+    geometric_normals: Vec<Vec3>,
     /// TEXCOORD_0 per corner (zero when the mesh has none).
-    pub uv0: Vec<[Vec2; 3]>,
+    uv0: Vec<[Vec2; 3]>,
     /// TEXCOORD_1 (lightmap layout) per corner, for instances whose mesh has it; empty
-    /// when no mesh has one (see [`Self::has_uv1`]).
-    pub uv1: Vec<[Vec2; 3]>,
+    /// when no mesh has one (see `has_uv1`).
+    uv1: Vec<[Vec2; 3]>,
     /// Whether each instance's mesh has TEXCOORD_1.
-    pub has_uv1: Vec<bool>,
+    has_uv1: Vec<bool>,
     /// Index into `materials` per triangle.
-    pub material: Vec<u32>,
+    material: Vec<u32>,
     /// Mesh vertex index of each corner (in the corner order above).
-    pub vertex_indices: Vec<[u32; 3]>,
+    vertex_indices: Vec<[u32; 3]>,
     /// Instance each triangle came from, and its index inside that instance's mesh.
-    pub instance: Vec<u32>,
-    pub local_triangle: Vec<u32>,
+    instance: Vec<u32>,
+    local_triangle: Vec<u32>,
     /// Triangle range of each instance.
-    pub instance_triangles: Vec<Range<u32>>,
+    instance_triangles: Vec<Range<u32>>,
     /// Name of each instance.
-    pub instance_names: Vec<String>,
+    instance_names: Vec<String>,
     /// A stable 64-bit identity of each instance (a hash of its name), for keying random
     /// streams so that results do not depend on instance order.
-    pub instance_keys: Vec<u64>,
+    instance_keys: Vec<u64>,
     /// Whether an instance's transform mirrors: its triangles' corners B and C are then
     /// swapped relative to the mesh (to keep the front face counter-clockwise).
-    pub mirrored: Vec<bool>,
-    pub materials: Vec<Arc<Material>>,
-    pub lights: Vec<Light>,
-    pub environment: Environment,
+    mirrored: Vec<bool>,
+    materials: Vec<Arc<Material>>,
+    lights: Vec<Light>,
+    environment: Environment,
     /// Emitters and environment for next-event estimation.
-    pub light_sampler: LightSampler,
+    light_sampler: LightSampler,
     /// Whether any material is alpha-masked (then hits are filtered through the mask).
     has_masks: bool,
     diagonal: f32,
@@ -93,6 +99,7 @@ impl TracedScene {
     pub fn new(scene: &Scene) -> Result<Self, SceneError> {
         scene.validate()?;
         let n = scene.triangle_count();
+        let instances = scene.instances.len();
         let mut s = TracedScene {
             bvh: Bvh::build(&[]),
             positions: Vec::with_capacity(n),
@@ -101,14 +108,14 @@ impl TracedScene {
             geometric_normals: Vec::with_capacity(n),
             uv0: Vec::with_capacity(n),
             uv1: Vec::new(),
-            has_uv1: Vec::with_capacity(scene.instances.len()),
+            has_uv1: Vec::with_capacity(instances),
             material: Vec::with_capacity(n),
             instance: Vec::with_capacity(n),
             local_triangle: Vec::with_capacity(n),
-            instance_triangles: Vec::with_capacity(scene.instances.len()),
-            instance_names: Vec::with_capacity(scene.instances.len()),
-            instance_keys: Vec::with_capacity(scene.instances.len()),
-            mirrored: Vec::with_capacity(scene.instances.len()),
+            instance_triangles: Vec::with_capacity(instances),
+            instance_names: Vec::with_capacity(instances),
+            instance_keys: Vec::with_capacity(instances),
+            mirrored: Vec::with_capacity(instances),
             materials: Vec::new(),
             lights: scene.lights.clone(),
             environment: scene.environment.clone(),
@@ -118,62 +125,7 @@ impl TracedScene {
         };
         let any_uv1 = scene.instances.iter().any(|i| !i.mesh.uv1.is_empty());
         for (k, inst) in scene.instances.iter().enumerate() {
-            let material = match s
-                .materials
-                .iter()
-                .position(|m| Arc::ptr_eq(m, &inst.material))
-            {
-                Some(i) => i,
-                None => {
-                    s.materials.push(inst.material.clone());
-                    s.materials.len() - 1
-                }
-            } as u32;
-            let normal_matrix = inst.transform.matrix3.inverse().transpose();
-            // A mirroring transform reverses the winding; swap B and C to keep the front face.
-            let mirrored = inst.transform.matrix3.determinant() < 0.0;
-            s.mirrored.push(mirrored);
-            s.instance_names.push(inst.name.clone());
-            s.instance_keys.push(name_key(&inst.name));
-            let mesh = &inst.mesh;
-            let start = s.positions.len() as u32;
-            s.has_uv1.push(!mesh.uv1.is_empty());
-            for (t, tri) in mesh.indices.iter().enumerate() {
-                let idx = if mirrored {
-                    [tri[0], tri[2], tri[1]]
-                } else {
-                    *tri
-                };
-                let p = idx.map(|i| inst.transform.transform_point3(mesh.positions[i as usize]));
-                let geo = (p[1] - p[0]).cross(p[2] - p[0]);
-                let Some(geo) = geo.try_normalize() else {
-                    continue; // degenerate after transformation
-                };
-                s.positions.push(p);
-                s.vertex_indices.push(idx);
-                s.geometric_normals.push(geo);
-                s.normals.push(idx.map(|i| {
-                    let n = (normal_matrix * mesh.normals[i as usize]).normalize_or(geo);
-                    // The normal function must keep ⟨μ_X, μ⟩ > 0 (docs/design.md, Physics).
-                    if n.dot(geo) > 0.0 { n } else { geo }
-                }));
-                s.uv0.push(if mesh.uv0.is_empty() {
-                    [Vec2::ZERO; 3]
-                } else {
-                    idx.map(|i| mesh.uv0[i as usize])
-                });
-                if any_uv1 {
-                    s.uv1.push(if mesh.uv1.is_empty() {
-                        [Vec2::ZERO; 3]
-                    } else {
-                        idx.map(|i| mesh.uv1[i as usize])
-                    });
-                }
-                s.material.push(material);
-                s.instance.push(k as u32);
-                s.local_triangle.push(t as u32);
-            }
-            s.instance_triangles.push(start..s.positions.len() as u32);
+            s.push_instance(k as u32, inst, any_uv1);
         }
         if s.positions.is_empty() {
             return Err(SceneError::Empty);
@@ -186,6 +138,193 @@ impl TracedScene {
         s.diagonal = s.bvh.scene_diagonal();
         s.light_sampler = LightSampler::new(&s);
         Ok(s)
+    }
+
+    /// Appends instance `k`'s triangles in world space (those degenerate after the
+    /// transformation are skipped), and its per-instance entries.
+    fn push_instance(&mut self, k: u32, inst: &Instance, any_uv1: bool) {
+        let material = match self
+            .materials
+            .iter()
+            .position(|m| Arc::ptr_eq(m, &inst.material))
+        {
+            Some(i) => i,
+            None => {
+                self.materials.push(inst.material.clone());
+                self.materials.len() - 1
+            }
+        } as u32;
+        let normal_matrix = inst.transform.matrix3.inverse().transpose();
+        // A mirroring transform reverses the winding; swap B and C to keep the front face.
+        let mirrored = inst.transform.matrix3.determinant() < 0.0;
+        self.mirrored.push(mirrored);
+        self.instance_names.push(inst.name.clone());
+        self.instance_keys.push(name_key(&inst.name));
+        let mesh = &inst.mesh;
+        let start = self.positions.len() as u32;
+        self.has_uv1.push(!mesh.uv1.is_empty());
+        for (t, tri) in mesh.indices.iter().enumerate() {
+            let idx = if mirrored {
+                [tri[0], tri[2], tri[1]]
+            } else {
+                *tri
+            };
+            let p = idx.map(|i| inst.transform.transform_point3(mesh.positions[i as usize]));
+            let geo = (p[1] - p[0]).cross(p[2] - p[0]);
+            let Some(geo) = geo.try_normalize() else {
+                continue; // degenerate after transformation
+            };
+            self.positions.push(p);
+            self.vertex_indices.push(idx);
+            self.geometric_normals.push(geo);
+            self.normals.push(idx.map(|i| {
+                let n = (normal_matrix * mesh.normals[i as usize]).normalize_or(geo);
+                // The normal function must keep ⟨μ_X, μ⟩ > 0 (docs/design.md, Physics).
+                if n.dot(geo) > 0.0 { n } else { geo }
+            }));
+            self.uv0.push(if mesh.uv0.is_empty() {
+                [Vec2::ZERO; 3]
+            } else {
+                idx.map(|i| mesh.uv0[i as usize])
+            });
+            if any_uv1 {
+                self.uv1.push(if mesh.uv1.is_empty() {
+                    [Vec2::ZERO; 3]
+                } else {
+                    idx.map(|i| mesh.uv1[i as usize])
+                });
+            }
+            self.material.push(material);
+            self.instance.push(k);
+            self.local_triangle.push(t as u32);
+        }
+        self.instance_triangles
+            .push(start..self.positions.len() as u32);
+    }
+
+    /// The BVH over [`Self::positions`].
+    #[inline]
+    pub fn bvh(&self) -> &Bvh {
+        &self.bvh
+    }
+
+    /// Makes the BVH traversal run with `level` (for tests and benchmarks: every level
+    /// gives the same answers); see [`Bvh::set_simd_level`].
+    #[doc(hidden)]
+    pub fn set_simd_level(&mut self, level: SimdLevel) -> bool {
+        self.bvh.set_simd_level(level)
+    }
+
+    /// Corner positions per triangle (front face counter-clockwise, even under mirroring).
+    #[inline]
+    pub fn positions(&self) -> &[[Vec3; 3]] {
+        &self.positions
+    }
+
+    /// Corner shading normals μ_A, μ_B, μ_C per triangle (world space, unit).
+    #[inline]
+    pub fn normals(&self) -> &[[Vec3; 3]] {
+        &self.normals
+    }
+
+    /// Unit front-face geometric normal μ per triangle.
+    #[inline]
+    pub fn geometric_normals(&self) -> &[Vec3] {
+        &self.geometric_normals
+    }
+
+    /// TEXCOORD_0 per corner (zero when the mesh has none).
+    #[inline]
+    pub fn uv0(&self) -> &[[Vec2; 3]] {
+        &self.uv0
+    }
+
+    /// TEXCOORD_1 (lightmap layout) per corner, zero for instances whose mesh has none
+    /// (see [`Self::has_uv1`]); empty when no mesh has one.
+    #[inline]
+    pub fn uv1(&self) -> &[[Vec2; 3]] {
+        &self.uv1
+    }
+
+    /// Whether each instance's mesh has TEXCOORD_1.
+    #[inline]
+    pub fn has_uv1(&self) -> &[bool] {
+        &self.has_uv1
+    }
+
+    /// Index into [`Self::materials`] per triangle.
+    #[inline]
+    pub fn material(&self) -> &[u32] {
+        &self.material
+    }
+
+    /// Mesh vertex index of each corner per triangle (in the corner order of
+    /// [`Self::positions`]).
+    #[inline]
+    pub fn vertex_indices(&self) -> &[[u32; 3]] {
+        &self.vertex_indices
+    }
+
+    /// Instance each triangle came from.
+    #[inline]
+    pub fn instance(&self) -> &[u32] {
+        &self.instance
+    }
+
+    /// Index of each triangle inside its instance's mesh.
+    #[inline]
+    pub fn local_triangle(&self) -> &[u32] {
+        &self.local_triangle
+    }
+
+    /// Triangle range of each instance.
+    #[inline]
+    pub fn instance_triangles(&self) -> &[Range<u32>] {
+        &self.instance_triangles
+    }
+
+    /// Name of each instance.
+    #[inline]
+    pub fn instance_names(&self) -> &[String] {
+        &self.instance_names
+    }
+
+    /// A stable 64-bit identity of each instance (a hash of its name, [`name_key`]), for
+    /// keying random streams so that results do not depend on instance order.
+    #[inline]
+    pub fn instance_keys(&self) -> &[u64] {
+        &self.instance_keys
+    }
+
+    /// Whether each instance's transform mirrors: its triangles' corners B and C are then
+    /// swapped relative to the mesh (to keep the front face counter-clockwise).
+    #[inline]
+    pub fn mirrored(&self) -> &[bool] {
+        &self.mirrored
+    }
+
+    /// The distinct materials, indexed by [`Self::material`].
+    #[inline]
+    pub fn materials(&self) -> &[Arc<Material>] {
+        &self.materials
+    }
+
+    /// The punctual lights.
+    #[inline]
+    pub fn lights(&self) -> &[Light] {
+        &self.lights
+    }
+
+    /// The environment (radiance arriving from infinitely far away).
+    #[inline]
+    pub fn environment(&self) -> &Environment {
+        &self.environment
+    }
+
+    /// Emitters and environment for next-event estimation.
+    #[inline]
+    pub fn light_sampler(&self) -> &LightSampler {
+        &self.light_sampler
     }
 
     /// A stable identity for triangle `t`: its instance's key and its index in the mesh.
@@ -412,7 +551,7 @@ impl TracedScene {
 mod tests {
     use super::*;
     use glam::Affine3A;
-    use surfcache_core::{Instance, Mesh};
+    use surfcache_core::Mesh;
 
     /// Every spawn origin lies at least the offset inside all three edges, also at acute
     /// corners (the leak guard).

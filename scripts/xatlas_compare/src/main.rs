@@ -44,18 +44,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let padding: u32 = args.get(4).map_or(Ok(2 * gutter), |s| s.parse())?;
     let traced = TracedScene::new(&load_scene(path)?.scene)?;
     let instances: Vec<(Vec<[Vec3; 3]>, Vec<Vec3>)> = traced
-        .instance_triangles
+        .instance_triangles()
         .iter()
         .map(|r| {
             let r = r.start as usize..r.end as usize;
             (
-                traced.positions[r.clone()].to_vec(),
-                traced.geometric_normals[r].to_vec(),
+                traced.positions()[r.clone()].to_vec(),
+                traced.geometric_normals()[r].to_vec(),
             )
         })
         .collect();
     let area: f64 = traced
-        .positions
+        .positions()
         .iter()
         .map(|&[a, b, c]| triangle_area(a, b, c) as f64)
         .sum();

@@ -42,8 +42,8 @@ pub fn sample_frame(scene: &TracedScene, site: &SampleSite) -> (SurfacePoint, Ve
         } => {
             let k = corner as usize;
             let sign = if front { 1.0 } else { -1.0 };
-            let n = scene.normals[triangle as usize][k] * sign;
-            let position = scene.positions[triangle as usize][k];
+            let n = scene.normals()[triangle as usize][k] * sign;
+            let position = scene.positions()[triangle as usize][k];
             let uv = [Vec2::ZERO, Vec2::X, Vec2::Y][k];
             let p = SurfacePoint {
                 position,
@@ -88,8 +88,8 @@ pub fn map_site(
             if t == UNMAPPED {
                 return None;
             }
-            let vertex = new.vertex_indices[triangle as usize][corner as usize];
-            let corner = old.vertex_indices[t as usize]
+            let vertex = new.vertex_indices()[triangle as usize][corner as usize];
+            let corner = old.vertex_indices()[t as usize]
                 .iter()
                 .position(|&v| v == vertex)? as u8;
             Some(SampleSite::Vertex {

@@ -33,7 +33,7 @@ pub fn crossed_grids(scene: &TracedScene, max_orders: &[u32], bake: &[bool]) -> 
 /// lights and of a bright sky are left to the refinement test.
 pub fn punctual_shadow_edges(scene: &TracedScene, max_orders: &[u32], bake: &[bool]) -> Vec<bool> {
     use rayon::prelude::*;
-    if scene.lights.is_empty() {
+    if scene.lights().is_empty() {
         return vec![false; bake.len()];
     }
     (0..bake.len())

@@ -207,7 +207,7 @@ impl IrradianceMaps {
     pub fn new(scene: &TracedScene, settings: IrradianceMapSettings) -> Self {
         let triangles = scene.triangle_count();
         let max_orders: Vec<u32> = scene
-            .positions
+            .positions()
             .iter()
             .map(|[a, b, c]| settings.max_order_for(longest_edge(*a, *b, *c)))
             .collect();

@@ -38,7 +38,7 @@ fn probe_new_samples(
         .par_iter()
         .map(|&(g, uv)| {
             let (t, front) = (g / 2, g % 2 == 0);
-            let [a, b, c] = scene.positions[t as usize];
+            let [a, b, c] = scene.positions()[t as usize];
             let reach =
                 crossings::LINE_REACH * longest_edge(a, b, c) / w.max_orders[t as usize] as f32;
             let probe = crossings::probe(scene, t, uv, front, reach);

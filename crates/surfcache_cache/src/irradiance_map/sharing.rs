@@ -25,8 +25,8 @@ pub fn corner_links(scene: &TracedScene, cos_max: f32, baked: &[bool]) -> Vec<u3
     };
     // Rules 2 and 3 for corner kr of r (the representative) and corner k of t.
     let may_share = |(r, kr): (u32, u8), (t, k): (u32, u8), front: bool| {
-        if scene.normals[r as usize][kr as usize] != scene.normals[t as usize][k as usize]
-            || scene.geometric_normals[r as usize].dot(scene.geometric_normals[t as usize])
+        if scene.normals()[r as usize][kr as usize] != scene.normals()[t as usize][k as usize]
+            || scene.geometric_normals()[r as usize].dot(scene.geometric_normals()[t as usize])
                 < cos_max
         {
             return false;
@@ -38,13 +38,13 @@ pub fn corner_links(scene: &TracedScene, cos_max: f32, baked: &[bool]) -> Vec<u3
         length == 0.0 || !scene.occluded(a, d / length, length)
     };
     let per_instance: Vec<Vec<(usize, u32)>> = scene
-        .instance_triangles
+        .instance_triangles()
         .par_iter()
         .map(|range| {
             let mut items: Vec<(u32, u32, u8)> = range
                 .clone()
                 .flat_map(|t| {
-                    let v = scene.vertex_indices[t as usize];
+                    let v = scene.vertex_indices()[t as usize];
                     (0..3u8).map(move |k| (v[k as usize], t, k))
                 })
                 .collect();

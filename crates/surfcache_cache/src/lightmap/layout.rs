@@ -99,7 +99,7 @@ impl Lightmaps {
         first_triangle: u32,
     ) -> BuiltInstance {
         let m = self.maps[io];
-        let range = scene.instance_triangles[io].clone();
+        let range = scene.instance_triangles()[io].clone();
         let (start, end) = (range.start as usize, range.end as usize);
         let charts = &self.chart[start..end];
         let base = charts.iter().copied().min().unwrap_or(0);
@@ -131,15 +131,15 @@ pub(super) fn build_instance(
     i: usize,
     settings: &LightmapSettings,
 ) -> BuiltInstance {
-    let range = scene.instance_triangles[i].clone();
+    let range = scene.instance_triangles()[i].clone();
     let (start, end) = (range.start as usize, range.end as usize);
-    let positions = &scene.positions[start..end];
-    let normals = &scene.geometric_normals[start..end];
+    let positions = &scene.positions()[start..end];
+    let normals = &scene.geometric_normals()[start..end];
     let world_area: f32 = positions
         .iter()
         .map(|&[a, b, c]| triangle_area(a, b, c))
         .sum();
-    let mesh_uv1 = scene.has_uv1[i].then(|| &scene.uv1[start..end]);
+    let mesh_uv1 = scene.has_uv1()[i].then(|| &scene.uv1()[start..end]);
     let uv_area = mesh_uv1.and_then(usable_uv1_area);
     let (width, height, uv1, found, clip, density, uses_mesh_uv1) = match (mesh_uv1, uv_area) {
         (Some(uv1), Some(uv_area)) => {

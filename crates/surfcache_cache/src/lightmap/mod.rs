@@ -227,7 +227,7 @@ pub struct Lightmaps {
 impl Lightmaps {
     /// Lays out and rasterises every instance of `scene` (in parallel over instances).
     pub fn new(scene: &TracedScene, settings: LightmapSettings) -> Self {
-        let built: Vec<BuiltInstance> = (0..scene.instance_triangles.len())
+        let built: Vec<BuiltInstance> = (0..scene.instance_triangles().len())
             .into_par_iter()
             .map(|i| build_instance(scene, i, &settings))
             .collect();

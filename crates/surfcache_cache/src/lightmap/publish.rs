@@ -11,17 +11,17 @@ impl Lightmaps {
     pub(super) fn textures(&self, scene: &TracedScene) -> Vec<IrradianceTexture> {
         let mut out = Vec::new();
         for (i, m) in self.maps.iter().enumerate() {
-            let range = scene.instance_triangles[i].clone();
+            let range = scene.instance_triangles()[i].clone();
             let mesh_triangles = range
                 .clone()
-                .map(|t| scene.local_triangle[t as usize] + 1)
+                .map(|t| scene.local_triangle()[t as usize] + 1)
                 .max()
                 .unwrap_or(0);
             let mut uv1 = vec![[Vec2::ZERO; 3]; mesh_triangles as usize];
             for t in range.clone() {
                 let [a, b, c] = self.uv1[t as usize];
                 // Traced corners B and C are the mesh's C and B under a mirroring transform.
-                uv1[scene.local_triangle[t as usize] as usize] = if scene.mirrored[i] {
+                uv1[scene.local_triangle()[t as usize] as usize] = if scene.mirrored()[i] {
                     [a, c, b]
                 } else {
                     [a, b, c]
@@ -34,7 +34,7 @@ impl Lightmaps {
                 }
                 out.push(IrradianceTexture {
                     instance: i as u32,
-                    name: scene.instance_names[i].clone(),
+                    name: scene.instance_names()[i].clone(),
                     front: layer == 0,
                     width: m.width,
                     height: m.height,

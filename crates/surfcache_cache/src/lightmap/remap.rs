@@ -17,19 +17,19 @@ impl Lightmaps {
         new: &TracedScene,
         triangle_map: &[u32],
     ) -> Self {
-        let mut reused: Vec<Option<usize>> = vec![None; new.instance_triangles.len()];
-        let built: Vec<BuiltInstance> = (0..new.instance_triangles.len())
+        let mut reused: Vec<Option<usize>> = vec![None; new.instance_triangles().len()];
+        let built: Vec<BuiltInstance> = (0..new.instance_triangles().len())
             .map(|i| {
-                let range = new.instance_triangles[i].clone();
+                let range = new.instance_triangles()[i].clone();
                 let first_old = triangle_map
                     .get(range.start as usize)
                     .copied()
                     .unwrap_or(UNMAPPED);
-                let i_old = old.instance.get(first_old as usize).map(|&k| k as usize);
+                let i_old = old.instance().get(first_old as usize).map(|&k| k as usize);
                 let one_to_one = i_old.is_some_and(|io| {
-                    let old_range = &old.instance_triangles[io];
+                    let old_range = &old.instance_triangles()[io];
                     old_range.len() == range.len()
-                        && old.mirrored[io] == new.mirrored[i]
+                        && old.mirrored()[io] == new.mirrored()[i]
                         && range
                             .clone()
                             .enumerate()

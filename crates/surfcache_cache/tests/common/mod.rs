@@ -90,7 +90,7 @@ pub fn locate(scene: &TracedScene, x: Vec3, n: Vec3) -> (u32, Vec2, bool) {
     let p = scene.locate(x, n).expect("point on a surface");
     let front = p
         .geometric_normal
-        .dot(scene.geometric_normals[p.triangle as usize])
+        .dot(scene.geometric_normals()[p.triangle as usize])
         > 0.0;
     (p.triangle, p.uv, front)
 }

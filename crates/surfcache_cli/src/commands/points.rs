@@ -118,7 +118,7 @@ fn visible_points(
     use glam::Vec3;
     use surfcache_core::sampling::uniform_sphere;
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    for t in &scene.positions {
+    for t in scene.positions() {
         for p in t {
             lo = lo.min(*p);
             hi = hi.max(*p);
@@ -142,7 +142,7 @@ fn visible_points(
             match scene.closest_hit(eye, d, f32::INFINITY) {
                 None => sky = true,
                 Some(h) => {
-                    let front = scene.geometric_normals[h.triangle as usize].dot(d) < 0.0;
+                    let front = scene.geometric_normals()[h.triangle as usize].dot(d) < 0.0;
                     if !front && !scene.material_of(h.triangle).double_sided {
                         inside = true;
                         break;
@@ -157,7 +157,7 @@ fn visible_points(
         let Some(h) = scene.closest_hit(eye, d, f32::INFINITY) else {
             continue;
         };
-        let mu = scene.geometric_normals[h.triangle as usize];
+        let mu = scene.geometric_normals()[h.triangle as usize];
         let n = if mu.dot(d) < 0.0 { mu } else { -mu };
         let p = scene.surface_point(h.triangle, h.uv, mu.dot(d) < 0.0);
         out.push((p.position, n));

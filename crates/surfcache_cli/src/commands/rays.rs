@@ -60,14 +60,14 @@ pub fn run(args: RaysArgs) -> Result<()> {
             }
         }
         "box" => {
-            let (lo, hi) = bounds(&scene.positions);
+            let (lo, hi) = bounds(scene.positions());
             for _ in 0..args.count {
                 let u = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
                 push(lo + (hi - lo) * u, uniform_sphere(rng.next_vec2()));
             }
         }
         "camera" => {
-            let (lo, hi) = bounds(&scene.positions);
+            let (lo, hi) = bounds(scene.positions());
             // Default: inside the bounds, 45 % of the depth in front of the centre.
             let c = 0.5 * (lo + hi);
             let eye = c - Vec3::Z * 0.45 * (hi.z - lo.z);

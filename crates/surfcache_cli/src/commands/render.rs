@@ -82,7 +82,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         Some(dir) => Some(read_archive_of(dir, &scene, &args.scene)?),
         None => None,
     };
-    let (lo, hi) = scene.positions.iter().flatten().fold(
+    let (lo, hi) = scene.positions().iter().flatten().fold(
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
     );
@@ -107,7 +107,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             .expect("static template"),
     );
     let shade = |hit: &Hit, d: Vec3, key: u64| -> Vec3 {
-        let front = scene.geometric_normals[hit.triangle as usize].dot(d) < 0.0;
+        let front = scene.geometric_normals()[hit.triangle as usize].dot(d) < 0.0;
         if let (Some(kind), Some(a)) = (show, &archive) {
             let diag = a.cache.diagnostic(hit.triangle, hit.uv, front);
             return match kind {
@@ -177,7 +177,7 @@ fn parse_size(s: &str) -> Result<(u32, u32)> {
 /// Radiance leaving a primary hit towards the camera (direction `d` from it):
 /// L = L_e + ρ/π · E, with E the irradiance on the side facing the camera.
 pub fn surface_radiance(scene: &TracedScene, hit: &Hit, d: Vec3, e: Vec3) -> Vec3 {
-    let front = scene.geometric_normals[hit.triangle as usize].dot(d) < 0.0;
+    let front = scene.geometric_normals()[hit.triangle as usize].dot(d) < 0.0;
     let material = scene.material_of(hit.triangle);
     let uv0 = scene.uv0_at(hit.triangle, hit.uv);
     material.emission_at(uv0, front) + material.albedo_at(uv0) * core::f32::consts::FRAC_1_PI * e
@@ -213,7 +213,7 @@ pub fn render_view(
                                 let key = ((y * width + x) * SUBPIXELS * SUBPIXELS + s) as u64;
                                 sum += shade(&hit, d, key);
                             }
-                            None if background => sum += scene.environment.radiance(d),
+                            None if background => sum += scene.environment().radiance(d),
                             None => {}
                         }
                     }

@@ -43,7 +43,7 @@ pub fn run(args: TraceArgs) -> Result<()> {
         .collect();
     let loaded = LoadedWorld::load(&args.scene, &EnvArgs::default())?;
     let scene = loaded.traced()?;
-    let bvh = &scene.bvh;
+    let bvh = scene.bvh();
     let mut results = vec![0f32; values.len() / 8];
     let any_hit = args.any_hit;
     let trace_seconds = with_threads(args.threads, || {
