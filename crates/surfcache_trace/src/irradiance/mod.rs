@@ -1,19 +1,35 @@
 //! Monte Carlo estimation of irradiance E(x, ν) = ∫_H L_in(x, ω) ⟨ν, ω⟩ dω at one point,
 //! with a selectable sampler and the thesis' adaptive stopping rule (docs/design.md, Estimator).
+//!
+//! This module holds the samplers, the estimator's settings, one sample of the hemisphere
+//! integral, [`estimate`] and the brute-force [`reference_irradiance`]; `adaptive` the
+//! stopping rule's loop and its statistics ([`Accumulator`], [`relative_error`],
+//! [`zero_run_std_error`]); `change` E of an edited scene from its prior value by
+//! correlated sampling ([`estimate_change`], [`unchanged`], the `CHANGE_*` constants).
+
+mod adaptive;
+mod change;
+
+pub use adaptive::{Accumulator, relative_error, zero_run_std_error};
+pub use change::{
+    CHANGE_ERROR_SHARE, CHANGE_FALLBACK_FACTOR, CHANGE_MIN_SAMPLES, CHANGE_PROBE_SAMPLES,
+    estimate_change, unchanged,
+};
 
 use crate::{
     guiding::{DirectionGuide, GuideRecord},
-    path_tracer::{FirstHit, IrradianceLookup, PathOptions, PathSample},
+    path_tracer::{IrradianceLookup, PathOptions, PathSample},
     traced_scene::{SurfacePoint, TracedScene},
 };
-use glam::{DVec3, Vec2, Vec3};
+use adaptive::sample_adaptively;
+use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 use surfcache_core::{
     color::luminance,
     geometry::{orthonormal_basis, to_world},
     sampling::{
         Cone, Rng, UNIFORM_HEMISPHERE_PDF, cosine_hemisphere, cosine_hemisphere_pdf,
-        cosine_hemisphere_square, sobol_4d, splitmix64, uniform_hemisphere,
+        cosine_hemisphere_square, uniform_hemisphere,
     },
 };
 
@@ -105,53 +121,6 @@ pub const BURIED_PROBE_SAMPLES: u32 = 16;
 /// `k mod R`. The standard error comes from the spread of the replicate means, which
 /// (unlike the spread of single samples) sees the stratification's gain.
 pub const QMC_REPLICATES: u32 = 16;
-
-/// Running sums of the samples X_i of one estimate (f64, so millions of samples stay exact).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Accumulator {
-    pub count: u32,
-    pub sum: DVec3,
-    pub sum_sq: DVec3,
-}
-
-impl Accumulator {
-    #[inline]
-    pub fn add(&mut self, x: Vec3) {
-        let x = x.as_dvec3();
-        self.count += 1;
-        self.sum += x;
-        self.sum_sq += x * x;
-    }
-
-    /// The mean Ē = (1/n) Σ X_i.
-    pub fn mean(&self) -> DVec3 {
-        self.sum / self.count.max(1) as f64
-    }
-
-    /// Standard error of the mean, sqrt(Σ(X_i − Ē)² / (n(n−1))) per channel (docs/design.md, Estimator).
-    pub fn std_error(&self) -> DVec3 {
-        if self.count < 2 {
-            return DVec3::splat(f64::INFINITY);
-        }
-        let n = self.count as f64;
-        let var = ((self.sum_sq - self.sum * self.sum / n) / (n - 1.0)).max(DVec3::ZERO);
-        (var / n).map(f64::sqrt)
-    }
-}
-
-/// Coefficient of variation of the mean, C = se / (Ē + ε), the maximum over the channels
-/// (docs/design.md, Estimator); a channel with no spread counts as exact.
-pub fn relative_error(mean: DVec3, std_error: DVec3, floor: f64) -> f64 {
-    (0..3)
-        .map(|c| {
-            if std_error[c] == 0.0 {
-                0.0
-            } else {
-                std_error[c] / (mean[c].max(0.0) + floor)
-            }
-        })
-        .fold(0.0, f64::max)
-}
 
 /// How one estimate is computed and when it stops.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -424,285 +393,6 @@ impl<'a> PointInScene<'a> {
 pub struct Guidance<'a> {
     pub guide: Option<&'a DirectionGuide>,
     pub record: Option<&'a GuideRecord>,
-}
-
-/// The least number of sample pairs of [`estimate_change`].
-pub const CHANGE_MIN_SAMPLES: u32 = QMC_REPLICATES;
-
-/// The share of the error bound a change estimate may add to its prior's error.
-pub const CHANGE_ERROR_SHARE: f32 = 0.5;
-
-/// Sample pairs of the probe that decides between estimating a change and estimating
-/// E afresh ([`estimate_change`]).
-pub const CHANGE_PROBE_SAMPLES: u32 = 4 * QMC_REPLICATES;
-
-/// [`estimate_change`] estimates E afresh when the probe projects more than this many
-/// times the estimator's `min_samples` pairs for the change (each pair traces two paths).
-pub const CHANGE_FALLBACK_FACTOR: f32 = 2.0;
-
-/// E at a point of an edited scene from its value `prior` before the edit plus the
-/// change, estimated by *correlated sampling*: every sample traces the same directions
-/// and random numbers in both scenes, X = X_new − X_old, so wherever the edit does not
-/// touch a path the difference is exactly zero and the estimate stops after
-/// [`CHANGE_MIN_SAMPLES`] pairs; it stops when its standard error is at most
-/// [`CHANGE_ERROR_SHARE`] × bound × (E + ε). Unbiased, E = E_old + E[X_new − X_old],
-/// except that a change within one standard error of zero is taken as zero (it moves
-/// the value by less than the change's error share; far from an edit it is noise).
-/// The punctual lights' exact parts enter as their difference too. An all-zero run of
-/// differences is exact where no path meets the edit, so it stops as it is (no
-/// [`ZERO_RUN_EVENTS`] bound: a re-bake would otherwise sample every untouched point
-/// hundreds of times). When a probe of [`CHANGE_PROBE_SAMPLES`] pairs projects the
-/// change to need more than [`CHANGE_FALLBACK_FACTOR`] × `min_samples` pairs, E is
-/// estimated afresh instead ([`estimate`] in the edited scene, with its gathering lookup).
-///
-/// With `focus`, only directions in that cone can differ (the edit lies inside it, and
-/// both scenes' gathering lookups agree elsewhere): the change is integrated over the
-/// cone alone ([`hemisphere_sample`]), and is exactly zero, with no rays traced, when
-/// the cone lies below the point's surface.
-pub fn estimate_change(
-    old: &PointInScene,
-    new: &PointInScene,
-    prior: Vec3,
-    settings: &EstimatorSettings,
-    seed: u64,
-    key: u64,
-    focus: Option<&Cone>,
-) -> Estimate {
-    if let Some(cone) = focus
-        && cone.below(new.point.geometric_normal)
-        && cone.below(old.point.geometric_normal)
-        && new.scene.lights().is_empty()
-        && old.scene.lights().is_empty()
-    {
-        return unchanged(prior, settings);
-    }
-    let mut punctual_rays = 0;
-    // Within one scene (the indirect stages of a re-bake) the punctual parts cancel.
-    let (punctual_new, punctual_old) = if std::ptr::eq(old.scene, new.scene) {
-        (Vec3::ZERO, Vec3::ZERO)
-    } else {
-        (
-            new.scene
-                .punctual_irradiance_from(&new.point, new.origin, &mut punctual_rays),
-            old.scene
-                .punctual_irradiance_from(&old.point, old.origin, &mut punctual_rays),
-        )
-    };
-    let bound = settings.max_rel_error * CHANGE_ERROR_SHARE;
-    let change = |max_samples: u32| {
-        let settings = EstimatorSettings {
-            max_samples,
-            ..*settings
-        };
-        sample_adaptively(
-            &settings,
-            seed,
-            key,
-            prior + punctual_new - punctual_old,
-            bound,
-            CHANGE_MIN_SAMPLES,
-            0.0,
-            |root, rng| {
-                let mut twin = rng.clone();
-                let (x_new, path_new) = hemisphere_sample(new, &settings, root, rng, focus);
-                let (x_old, path_old) = hemisphere_sample(old, &settings, root, &mut twin, focus);
-                (
-                    x_new - x_old,
-                    path_new.first_hit,
-                    path_new.rays + path_old.rays,
-                )
-            },
-        )
-    };
-    // A probe tells whether the change is cheaper to estimate than E itself: where the
-    // edit changes a large part of a dark point's light (a shadow moved onto it), the
-    // change has the variance of the old, bright E but must reach the precision of the
-    // new, dim one; a fresh estimate of E is then cheaper.
-    let probe_samples = CHANGE_PROBE_SAMPLES.min(settings.max_samples);
-    let probe = change(probe_samples);
-    let (mut e, fresh) = if probe.samples < probe_samples || probe.rel_error <= bound {
-        (probe, false)
-    } else {
-        let projected = probe.samples as f32 * (probe.rel_error / bound).powi(2);
-        let (mut e, fresh) = if projected > CHANGE_FALLBACK_FACTOR * settings.min_samples as f32 {
-            let e = estimate(new, settings, seed, key);
-            (e, true)
-        } else {
-            (change(settings.max_samples), false)
-        };
-        e.rays += probe.rays;
-        (e, fresh)
-    };
-    if !fresh {
-        // A sampled change within one standard error of zero in every channel is noise
-        // as far as this estimate can tell: keep the prior (plus the exact punctual
-        // change). The value then differs from the unbiased one by at most that standard
-        // error, within the change's error share, and re-bakes do not spread the noise
-        // of far points, which an edit barely touches, through their indirect stages.
-        let offset = prior + punctual_new - punctual_old;
-        if (e.value - offset).abs().cmple(e.std_error).all() {
-            e.value = offset;
-        }
-        e.std_error = with_prior_error(e.value, e.std_error, settings);
-    }
-    e.rays += punctual_rays as u64;
-    e
-}
-
-/// The estimate of a point whose change is known to be zero (or is left out): its
-/// `prior`, with the prior's error ([`estimate_change`]); no samples, no rays.
-pub fn unchanged(prior: Vec3, settings: &EstimatorSettings) -> Estimate {
-    Estimate {
-        value: prior,
-        std_error: with_prior_error(prior, Vec3::ZERO, settings),
-        ..Default::default()
-    }
-}
-
-/// The standard error of prior + change: the prior's, taken at the bound its estimate
-/// met (its own is not kept), and the change's `se`, added in quadrature.
-fn with_prior_error(value: Vec3, se: Vec3, settings: &EstimatorSettings) -> Vec3 {
-    let prior = settings.max_rel_error * (value.abs() + Vec3::splat(settings.floor));
-    (se * se + prior * prior).map(f32::sqrt)
-}
-
-/// The adaptive loop of [`estimate`] and [`estimate_change`]: draws X = `draw(root, rng)`
-/// in rounds of [`QMC_REPLICATES`] (root dimensions from per-replicate scrambled Sobol
-/// points or from the stream) until C = se / (|offset + mean| + ε) ≤ `bound` from `min`
-/// samples on, or `settings.max_samples`; the value is offset + mean.
-///
-/// `unseen` > 0: while every sample is exactly zero (and at most half the first rays hit a
-/// back face), the standard error is at least [`zero_run_std_error`]`(n, unseen)` in every
-/// channel, compared with the brightest channel of the value (the missed light's colour is
-/// unknown).
-#[allow(clippy::too_many_arguments)]
-fn sample_adaptively(
-    settings: &EstimatorSettings,
-    seed: u64,
-    key: u64,
-    offset: Vec3,
-    bound: f32,
-    min: u32,
-    unseen: f64,
-    mut draw: impl FnMut([f32; 5], &mut Rng) -> (Vec3, FirstHit, u32),
-) -> Estimate {
-    let sampler = settings.sampler;
-    let mut rng = Rng::new(seed, key);
-    let floor = settings.floor as f64;
-    let max = settings.max_samples.max(1);
-    let min = min.clamp(1, max);
-    let (mut back, mut rays, mut lit) = (0u32, 0u64, 0u32);
-    // Pseudo-random: one accumulator. Quasi-random: one per replicate.
-    let mut single = Accumulator::default();
-    let mut replicates = [Accumulator::default(); QMC_REPLICATES as usize];
-    // One Owen scrambling per replicate, keyed by (seed, key, replicate).
-    let point = splitmix64(seed ^ splitmix64(key ^ 0x5bd1_e995_0000_0000));
-    let streams: [u32; QMC_REPLICATES as usize] =
-        core::array::from_fn(|r| splitmix64(point ^ r as u64) as u32);
-    let mut n = 0u32;
-    let (mean, std_error) = loop {
-        let round_end = (n + QMC_REPLICATES).min(max);
-        while n < round_end {
-            let root = if sampler.quasi_random() {
-                let stream = streams[(n % QMC_REPLICATES) as usize];
-                let index = n / QMC_REPLICATES;
-                let [a, b, c, d] = sobol_4d(index, 0, stream);
-                let [e, ..] = sobol_4d(index, 1, stream);
-                [a, b, c, d, e]
-            } else {
-                let mut r = [0.0; 5];
-                r.iter_mut().for_each(|v| *v = rng.next_f32());
-                r
-            };
-            let (x, first_hit, path_rays) = draw(root, &mut rng);
-            back += (first_hit == FirstHit::Back) as u32;
-            lit += (x != Vec3::ZERO) as u32;
-            rays += path_rays as u64;
-            if sampler.quasi_random() {
-                replicates[(n % QMC_REPLICATES) as usize].add(x);
-            } else {
-                single.add(x);
-            }
-            n += 1;
-        }
-        let (mean, se) = if sampler.quasi_random() {
-            replicate_statistics(&replicates)
-        } else {
-            (single.mean(), single.std_error())
-        };
-        let total = (mean + offset.as_dvec3()).abs();
-        let zero_run = zero_run_error(n, lit, back, unseen, total, floor);
-        let c = relative_error(total, se, floor).max(zero_run.1);
-        // Every first ray so far met the back of a single-sided surface: the point lies
-        // inside a solid, and the caches discard it whatever more samples would say.
-        let buried = n >= BURIED_PROBE_SAMPLES && back == n;
-        if n >= max || (n >= min && c <= bound as f64) || buried {
-            break (mean, se.max(DVec3::splat(zero_run.0)));
-        }
-    };
-    let value = (mean + offset.as_dvec3()).as_vec3();
-    let std_error = if n < 2 {
-        Vec3::ZERO
-    } else {
-        std_error.as_vec3()
-    };
-    let zero_run = zero_run_error(n, lit, back, unseen, value.as_dvec3().abs(), floor).1;
-    Estimate {
-        value,
-        std_error,
-        samples: n,
-        rel_error: relative_error(value.as_dvec3().abs(), std_error.as_dvec3(), floor).max(zero_run)
-            as f32,
-        back_face_share: back as f32 / n as f32,
-        rays,
-    }
-}
-
-/// The standard error [`ZERO_RUN_EVENTS`] × `unseen` / n of a run of `n` samples that are
-/// all exactly zero, where light events would each carry about `unseen`.
-pub fn zero_run_std_error(n: u32, unseen: f64) -> f64 {
-    ZERO_RUN_EVENTS * unseen / n.max(1) as f64
-}
-
-/// (standard error, relative error) of the light an all-zero run may have missed, against
-/// the brightest channel of `total` (0, 0 unless the run is all zero, `unseen` > 0 and at
-/// most half the first rays hit a back face).
-fn zero_run_error(
-    n: u32,
-    lit: u32,
-    back: u32,
-    unseen: f64,
-    total: DVec3,
-    floor: f64,
-) -> (f64, f64) {
-    if lit > 0 || 2 * back > n || unseen <= 0.0 {
-        return (0.0, 0.0);
-    }
-    let se = zero_run_std_error(n, unseen);
-    (se, se / (total.max_element() + floor))
-}
-
-/// Mean and standard error from randomised QMC replicates: the mean of all samples, and
-/// the spread of the replicate means over √R.
-fn replicate_statistics(replicates: &[Accumulator]) -> (DVec3, DVec3) {
-    let filled = || replicates.iter().filter(|a| a.count > 0);
-    let n: u32 = filled().map(|a| a.count).sum();
-    let sum: DVec3 = filled().map(|a| a.sum).sum();
-    let mean = sum / n.max(1) as f64;
-    let r = filled().count();
-    if r < 2 {
-        return (mean, DVec3::splat(f64::INFINITY));
-    }
-    // Unbiased variance of replicate means around the overall mean (equal counts at
-    // round boundaries, where it is evaluated).
-    let var_means: DVec3 = filled()
-        .map(|a| {
-            let d = a.mean() - mean;
-            d * d
-        })
-        .sum::<DVec3>()
-        / (r as f64 - 1.0);
-    (mean, (var_means / r as f64).map(f64::sqrt))
 }
 
 /// A query: a world-space point on a surface and the normal of the side asked about.
