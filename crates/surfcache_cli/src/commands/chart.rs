@@ -6,24 +6,22 @@
 //! `speed_accuracy.csv`, two log-log charts and a summary. Each scene's panel plots the
 //! measure that says most about it ([`panel_measure`]).
 
-use crate::{
-    baking::{self, BakeOptions, parse_method, parse_sampler},
-    commands::compare::compare,
-    points::{ResultRow, lookup_points, read_points, read_results},
-    scene_args::{EnvArgs, LoadedWorld},
-};
+use crate::baking::{parse_method, parse_sampler};
 use anyhow::{Context, Result, bail};
 use std::{
-    collections::BTreeMap,
-    fmt::Write as _,
     path::{Path, PathBuf},
-    time::{Duration, Instant},
+    time::Instant,
 };
-use surfcache_cache::{Method, SurfaceCache, bake::JobProgress};
-use surfcache_trace::{Query, Sampler};
+use surfcache_cache::Method;
+use surfcache_trace::Sampler;
+use sweep::SweepPlan;
 
 mod plot;
+mod scenes;
 mod summary;
+mod sweep;
+
+pub use scenes::{SceneSpec, panel_measure};
 
 /// The CSV header of `speed_accuracy.csv`.
 pub const CSV_HEADER: &str =
@@ -55,15 +53,6 @@ impl ErrorMeasure {
             ErrorMeasure::RelRms => "relative RMS error (log)",
             ErrorMeasure::Median => "median per-point relative error (log)",
         }
-    }
-}
-
-/// What a scene's panel plots: on a level (Sponza) the median per-point error, which
-/// a few contact spots cannot decide; on the Cornell box the relative RMS, as before.
-pub fn panel_measure(scene: &str) -> ErrorMeasure {
-    match scene {
-        "sponza" => ErrorMeasure::Median,
-        _ => ErrorMeasure::RelRms,
     }
 }
 
@@ -132,61 +121,6 @@ pub struct ChartArgs {
     /// Redraw the charts and the summary from OUT/speed_accuracy.csv without baking.
     #[arg(long)]
     replot: bool,
-}
-
-/// One scene of the chart and the settings its bakes use.
-pub struct SceneSpec {
-    pub name: &'static str,
-    /// A .gltf path or built-in name.
-    scene: String,
-    env: EnvArgs,
-    points: PathBuf,
-    reference: PathBuf,
-    max_seconds: f64,
-}
-
-/// The HDR map Sponza is lit by (in the shared assets' `envmaps/`): the sunny sky its
-/// reference was path-traced under (docs/results.md, "Sponza at the defaults: the
-/// reference").
-pub const SPONZA_ENV: &str = "immenstadter_horn_1k.exr";
-
-fn scene_spec(name: &str, args: &ChartArgs) -> Result<Option<SceneSpec>> {
-    match name {
-        "cornell" => Ok(Some(SceneSpec {
-            name: "cornell",
-            scene: "cornell".into(),
-            env: EnvArgs::default(),
-            points: args.assets.join("cornell_points.csv"),
-            reference: args.assets.join("cornell_reference.csv"),
-            max_seconds: args.max_seconds,
-        })),
-        "sponza" => {
-            let gltf = args.shared_assets.join("scenes/sponza_crytek/Sponza.gltf");
-            let env = args.shared_assets.join("envmaps").join(SPONZA_ENV);
-            if !gltf.is_file() || !env.is_file() {
-                eprintln!(
-                    "chart: skipping sponza: {} or {} is not there (--shared-assets)",
-                    gltf.display(),
-                    env.display()
-                );
-                return Ok(None);
-            }
-            Ok(Some(SceneSpec {
-                name: "sponza",
-                scene: gltf.display().to_string(),
-                env: EnvArgs {
-                    env: Some(env),
-                    ..Default::default()
-                },
-                points: args.assets.join("reference/sponza_visible_points.csv"),
-                reference: args
-                    .assets
-                    .join("reference/sponza_visible_immenstadter.csv"),
-                max_seconds: args.sponza_max_seconds,
-            }))
-        }
-        other => bail!("unknown chart scene '{other}' (known: cornell, sponza)"),
-    }
 }
 
 /// What one (scene, method, sampler, bound) point of the sweep gave.
@@ -313,41 +247,8 @@ pub fn read_csv(path: &Path) -> Result<Vec<Row>> {
     Ok(rows)
 }
 
-/// The point set and reference of a scene, the first `limit` rows.
-fn point_set(spec: &SceneSpec, limit: Option<usize>) -> Result<(Vec<Query>, Vec<ResultRow>)> {
-    let mut queries = read_points(&spec.points)?;
-    let mut reference = read_results(&spec.reference)?;
-    if queries.len() != reference.len() {
-        bail!(
-            "'{}' has {} points but '{}' has {} rows",
-            spec.points.display(),
-            queries.len(),
-            spec.reference.display(),
-            reference.len()
-        );
-    }
-    if let Some(n) = limit {
-        queries.truncate(n);
-        reference.truncate(n);
-    }
-    if let Some(i) = queries
-        .iter()
-        .zip(&reference)
-        .position(|(q, r)| (q.position - r.position).length() > 1e-5 * (1.0 + r.position.length()))
-    {
-        bail!(
-            "row {} of '{}' is not at the point of '{}'",
-            i + 1,
-            spec.reference.display(),
-            spec.points.display()
-        );
-    }
-    if queries.is_empty() {
-        bail!("'{}' has no points", spec.points.display());
-    }
-    Ok((queries, reference))
-}
-
+/// `surfcache chart`: sweeps every scene (or redraws from the CSV with `--replot`), then
+/// writes the CSV, the charts and the summary.
 pub fn run(args: ChartArgs) -> Result<()> {
     let csv_path = args.out.join("speed_accuracy.csv");
     if args.replot {
@@ -364,228 +265,33 @@ pub fn run(args: ChartArgs) -> Result<()> {
         .iter()
         .map(|s| parse_sampler(s))
         .collect::<Result<_>>()?;
-    let sort_bounds = |b: &[f32]| -> Result<Vec<f32>> {
-        if b.is_empty() || b.iter().any(|b| !(b.is_finite() && *b > 0.0)) {
-            bail!("error bounds must be positive numbers");
-        }
-        let mut b = b.to_vec();
-        b.sort_by(|x, y| y.total_cmp(x));
-        b.dedup();
-        Ok(b)
-    };
-    let bounds = sort_bounds(&args.bounds)?;
-    let sponza_bounds = match &args.sponza_bounds {
-        Some(b) => sort_bounds(b)?,
-        None => bounds.clone(),
-    };
-    if !(args.max_seconds > 0.0 && args.sponza_max_seconds > 0.0) {
-        bail!("--max-seconds and --sponza-max-seconds must be positive");
-    }
+    let limits = scenes::sweep_limits(&args)?;
     if args.points == Some(0) {
         bail!("--points must be at least 1");
     }
     let specs: Vec<SceneSpec> = args
         .scenes
         .iter()
-        .map(|s| scene_spec(s, &args))
+        .map(|s| scenes::scene_spec(s, &args, &limits))
         .collect::<Result<Vec<_>>>()?
         .into_iter()
         .flatten()
         .collect();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create '{}'", args.out.display()))?;
+    let plan = SweepPlan {
+        methods: &methods,
+        samplers: &samplers,
+        seed: args.seed,
+        threads: args.threads,
+        points: args.points,
+        csv_path: &csv_path,
+    };
     let run_start = Instant::now();
     let mut rows: Vec<Row> = Vec::new();
     let mut settings_notes = String::new();
     for spec in &specs {
-        let (queries, reference) = point_set(spec, args.points)?;
-        let reference_values: Vec<_> = reference
-            .iter()
-            .map(|r| (r.position, r.irradiance, r.rel_std))
-            .collect();
-        let sweep_start = Instant::now();
-        let max = Duration::from_secs_f64(spec.max_seconds);
-        let budget = if spec.name == "sponza" {
-            args.sponza_budget_seconds.or(args.budget_seconds)
-        } else {
-            args.budget_seconds
-        }
-        .map(Duration::from_secs_f64);
-        let mut loaded = LoadedWorld::load(&spec.scene, &spec.env)?;
-        let scene = loaded.traced()?;
-        let own_noise = compare(
-            &reference_values
-                .iter()
-                .map(|r| (r.0, r.1))
-                .collect::<Vec<_>>(),
-            &reference_values,
-        );
-        let noise = own_noise
-            .reference_noise
-            .map_or("unknown".into(), |s| format!("{:.2} %", 100.0 * s));
-        let note = format!(
-            "{}: {} triangles, {} reference points ({} lit), the reference's own noise in the rel_rms measure {noise}; {}",
-            spec.name,
-            scene.triangle_count(),
-            queries.len(),
-            own_noise.points,
-            describe_settings(spec)
-        );
-        eprintln!("chart: {note}");
-        let _ = writeln!(settings_notes, "- {note}");
-        let scene_bounds = if spec.name == "sponza" {
-            &sponza_bounds
-        } else {
-            &bounds
-        };
-        // Per curve: the last finished bake (bound, seconds), or why it stopped.
-        let mut last: BTreeMap<(usize, usize), (f32, f64)> = BTreeMap::new();
-        let mut stopped: BTreeMap<(usize, usize), String> = BTreeMap::new();
-        // Sampler by sampler (in the order given), each bound for every method before the
-        // next tighter one: under a budget the first samplers' curves come out whole and
-        // the later ones keep at least their loose ends.
-        for (si, &sampler) in samplers.iter().enumerate() {
-            for &bound in scene_bounds {
-                for (mi, &method) in methods.iter().enumerate() {
-                    let key = (mi, si);
-                    let mut row = Row {
-                        scene: spec.name.into(),
-                        method: method.name().into(),
-                        sampler: sampler.name().into(),
-                        bound,
-                        seconds: 0.0,
-                        measured: None,
-                        note: String::new(),
-                    };
-                    let skip = if let Some(why) = stopped.get(&key) {
-                        Some(why.clone())
-                    } else if budget.is_some_and(|b| sweep_start.elapsed() >= b) {
-                        Some("the scene's --budget-seconds was spent".to_string())
-                    } else if let Some(&(b0, t0)) = last.get(&key) {
-                        // Time grows with the square of 1/bound once sampling dominates,
-                        // more slowly while fixed costs (minimum samples, pre-passes) do:
-                        // growing linearly is the cautious guess.
-                        let predicted = t0 * (b0 as f64 / bound as f64);
-                        (predicted > spec.max_seconds).then(|| {
-                            format!(
-                                "predicted at least {predicted:.0} s (from {t0:.0} s at bound {b0}) > the scene's cap (--max-seconds)"
-                            )
-                        })
-                    } else {
-                        None
-                    };
-                    if let Some(why) = skip {
-                        eprintln!(
-                            "chart: {} {} {} bound {bound}: skipped ({why})",
-                            spec.name,
-                            method.name(),
-                            sampler.name()
-                        );
-                        row.note = why;
-                        rows.push(row);
-                        write_csv(&csv_path, &rows)?;
-                        continue;
-                    }
-                    let options = BakeOptions {
-                        method,
-                        sampler,
-                        max_rel_error: bound,
-                        // Every other setting as `surfcache bake` has it by default.
-                        min_samples: None,
-                        max_samples: None,
-                        samples: None,
-                        bounces: None,
-                        seed: args.seed,
-                        density: None,
-                        interpolation_error: None,
-                        gather: surfcache_cache::bake::DEFAULT_GATHER_PASSES,
-                        both_sides: true,
-                        share_corners: true,
-                        filter_passes: None,
-                        guiding: true,
-                    };
-                    let elapsed_at_start = sweep_start.elapsed();
-                    let reached = std::sync::Mutex::new(JobProgress::default());
-                    let stop = |t: Duration, p: &JobProgress| {
-                        if let Ok(mut r) = reached.lock() {
-                            *r = *p;
-                        }
-                        t > max || budget.is_some_and(|b| elapsed_at_start + t > b)
-                    };
-                    let started = Instant::now();
-                    let baked =
-                        baking::bake(&mut loaded, options.settings()?, args.threads, &stop)?;
-                    let Some(baked) = baked else {
-                        let t = started.elapsed().as_secs_f64();
-                        let p = reached.into_inner().unwrap_or_default();
-                        let (done, pending) = (p.current.points_done, p.current.points_pending);
-                        let rate = if p.pass + 1 == p.passes && done > 0 {
-                            format!(
-                                "; its current round alone would take about {:.0} min at this rate",
-                                t * (done + pending) as f64 / done as f64 / 60.0
-                            )
-                        } else {
-                            String::new()
-                        };
-                        let at = format!(
-                            "pass {}/{}, {done} points done, {pending} pending{rate}",
-                            p.pass + 1,
-                            p.passes,
-                        );
-                        let why = if t > spec.max_seconds {
-                            format!("abandoned after {t:.0} s ({at}) > the scene's cap")
-                        } else {
-                            format!(
-                                "abandoned after {t:.0} s ({at}): the scene's --budget-seconds ran out"
-                            )
-                        };
-                        eprintln!(
-                            "chart: {} {} {} bound {bound}: {why}; tighter bounds skipped",
-                            spec.name,
-                            method.name(),
-                            sampler.name()
-                        );
-                        row.seconds = t;
-                        row.note = why.clone();
-                        stopped.insert(key, format!("a looser bound was {why}"));
-                        rows.push(row);
-                        write_csv(&csv_path, &rows)?;
-                        continue;
-                    };
-                    let values = lookup_points(&scene, &baked.cache, &queries);
-                    let result: Vec<_> = queries
-                        .iter()
-                        .zip(&values)
-                        .map(|(q, v)| (q.position, v.unwrap_or(glam::Vec3::NAN)))
-                        .collect();
-                    let c = compare(&result, &reference_values);
-                    let stats = baked.cache.stats();
-                    row.seconds = baked.seconds;
-                    row.measured = Some(Measured {
-                        rel_rms: c.rel_rms,
-                        bytes: stats.cache_bytes,
-                        sample_points: stats.sample_points,
-                        median_rel: c.median_rel,
-                        p90_rel: c.p90_rel,
-                    });
-                    eprintln!(
-                        "chart: {} {} {} bound {bound}: {:.1} s, rel_rms {:.4}, median {:.4}, p90 {:.4}, {} bytes, {} sample points",
-                        spec.name,
-                        method.name(),
-                        sampler.name(),
-                        baked.seconds,
-                        c.rel_rms,
-                        c.median_rel,
-                        c.p90_rel,
-                        stats.cache_bytes,
-                        stats.sample_points
-                    );
-                    last.insert(key, (bound, baked.seconds));
-                    rows.push(row);
-                    write_csv(&csv_path, &rows)?;
-                }
-            }
-        }
+        sweep::sweep_scene(&plan, spec, &mut rows, &mut settings_notes)?;
         finish(&args.out, &rows, &settings_notes)?;
     }
     finish(&args.out, &rows, &settings_notes)?;
@@ -603,7 +309,7 @@ fn describe_settings(spec: &SceneSpec) -> String {
     format!(
         "irradiance-map density default samples/m, lightmap default texels/m, samples per estimate default to default, gathering pre-passes {}, sides both, each bake capped at {:.0} s",
         surfcache_cache::bake::DEFAULT_GATHER_PASSES,
-        spec.max_seconds
+        spec.limits.max_seconds
     )
 }
 
