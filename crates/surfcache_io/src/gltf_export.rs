@@ -14,7 +14,7 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 use surfcache_core::glam::{Mat4, Quat, Vec3};
-use surfcache_core::{AlphaMode, Light, Material, Mesh, Scene};
+use surfcache_core::{AlphaMode, Instance, Light, Material, Mesh, Scene};
 
 /// A baked lightmap for one instance, recorded in its node's `extras` as
 /// `{"surfcache_lightmap": {"uri": .., "uv_rect": [x, y, w, h]}}`.
@@ -199,6 +199,138 @@ fn light_json(light: &Light, k: usize) -> (Value, Value) {
     }
 }
 
+/// The glTF document being assembled: the binary buffer, and the materials, meshes and
+/// nodes written so far, with the indices of the materials and meshes already written.
+#[derive(Default)]
+struct GltfDocument {
+    b: BinaryBuilder,
+    materials: Vec<Value>,
+    material_ids: HashMap<*const Material, usize>,
+    meshes: Vec<Value>,
+    mesh_ids: HashMap<(*const Mesh, *const Material), usize>,
+    nodes: Vec<Value>,
+    /// Whether a material uses KHR_materials_emissive_strength.
+    uses_strength: bool,
+}
+
+impl GltfDocument {
+    /// The index of `material`, written on its first use.
+    fn material(&mut self, material: &Arc<Material>) -> usize {
+        match self.material_ids.get(&Arc::as_ptr(material)) {
+            Some(&i) => i,
+            None => {
+                let v = material_json(material);
+                self.uses_strength |= v.get("extensions").is_some();
+                self.materials.push(v);
+                self.material_ids
+                    .insert(Arc::as_ptr(material), self.materials.len() - 1);
+                self.materials.len() - 1
+            }
+        }
+    }
+
+    /// The index of the glTF mesh of (`mesh`, `material`), written on its first use with
+    /// `mat`, the material's index.
+    fn mesh(&mut self, mesh: &Arc<Mesh>, material: &Arc<Material>, mat: usize) -> usize {
+        let key = (Arc::as_ptr(mesh), Arc::as_ptr(material));
+        if let Some(&i) = self.mesh_ids.get(&key) {
+            return i;
+        }
+        let b = &mut self.b;
+        let flat3 = |v: &[Vec3]| v.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>();
+        let mut attributes = serde_json::Map::new();
+        attributes.insert(
+            "POSITION".into(),
+            b.floats(&flat3(&mesh.positions), 3, true).into(),
+        );
+        if mesh.normals.len() == mesh.positions.len() {
+            attributes.insert(
+                "NORMAL".into(),
+                b.floats(&flat3(&mesh.normals), 3, false).into(),
+            );
+        }
+        for (name, uv) in [("TEXCOORD_0", &mesh.uv0), ("TEXCOORD_1", &mesh.uv1)] {
+            if !uv.is_empty() && uv.len() == mesh.positions.len() {
+                let flat: Vec<f32> = uv.iter().flat_map(|t| t.to_array()).collect();
+                attributes.insert(name.into(), b.floats(&flat, 2, false).into());
+            }
+        }
+        let indices = b.indices(&mesh.indices);
+        self.meshes.push(json!({
+            "name": mesh.name,
+            "primitives": [{
+                "attributes": attributes,
+                "indices": indices,
+                "material": mat,
+                "mode": 4,
+            }],
+        }));
+        self.mesh_ids.insert(key, self.meshes.len() - 1);
+        self.meshes.len() - 1
+    }
+
+    /// The node of instance `inst` showing mesh `mesh_id`: its transform as a `matrix`
+    /// (none for the identity) and its lightmap in the `extras`.
+    fn instance_node(inst: &Instance, mesh_id: usize, lightmap: Option<&LightmapRef>) -> Value {
+        let mut node = json!({ "name": inst.name, "mesh": mesh_id });
+        let m = Mat4::from(inst.transform);
+        if m != Mat4::IDENTITY {
+            node["matrix"] = nums(&m.to_cols_array());
+        }
+        if let Some(l) = lightmap {
+            node["extras"] = json!({
+                "surfcache_lightmap": { "uri": l.uri, "uv_rect": nums(&l.uv_rect) }
+            });
+        }
+        node
+    }
+
+    /// The document's root: the scene (its environment in the `extras`, the map as
+    /// `env_map_uri`), everything written, the buffer `bin_name`, the punctual `lights`
+    /// and the extensions used.
+    fn root(
+        &self,
+        scene: &Scene,
+        lights: &[Value],
+        env_map_uri: &Option<String>,
+        bin_name: &str,
+    ) -> Value {
+        let env = &scene.environment;
+        let b = &self.b;
+        let mut root = json!({
+            "asset": { "version": "2.0", "generator": "surfcache" },
+            "scene": 0,
+            "scenes": [{
+                "name": scene.name,
+                "nodes": (0..self.nodes.len()).collect::<Vec<_>>(),
+                "extras": { "surfcache_environment": {
+                    "color": nums(&env.color.to_array()),
+                    "intensity": num(env.intensity),
+                    "map": env_map_uri,
+                }},
+            }],
+            "nodes": self.nodes,
+            "meshes": self.meshes,
+            "materials": self.materials,
+            "accessors": b.accessors,
+            "bufferViews": b.views,
+            "buffers": [{ "uri": bin_name, "byteLength": b.bin.len() }],
+        });
+        let mut used = Vec::new();
+        if !lights.is_empty() {
+            used.push("KHR_lights_punctual");
+            root["extensions"] = json!({ "KHR_lights_punctual": { "lights": lights } });
+        }
+        if self.uses_strength {
+            used.push("KHR_materials_emissive_strength");
+        }
+        if !used.is_empty() {
+            root["extensionsUsed"] = json!(used);
+        }
+        root
+    }
+}
+
 /// Writes `scene` as `path` (.gltf JSON) + a sibling `.bin` (and `<stem>_environment.exr`
 /// when the environment has a map), each through a temporary file renamed into place.
 /// `lightmaps[k]` (if present) is the lightmap of instance `k`; `lightmaps` may be shorter
@@ -214,77 +346,17 @@ pub fn write_gltf(
         .filter(|s| !s.is_empty())
         .ok_or_else(|| IoError::write(path, "the path has no file name"))?;
     let bin_name = format!("{stem}.bin");
-    let mut b = BinaryBuilder::default();
-    let mut materials: Vec<Value> = Vec::new();
-    let mut material_ids: HashMap<*const Material, usize> = HashMap::new();
-    let mut meshes: Vec<Value> = Vec::new();
-    let mut mesh_ids: HashMap<(*const Mesh, *const Material), usize> = HashMap::new();
-    let mut nodes: Vec<Value> = Vec::new();
-    let mut uses_strength = false;
-
+    let mut doc = GltfDocument::default();
     for (k, inst) in scene.instances.iter().enumerate() {
         let lightmap = lightmaps.get(k).and_then(Option::as_ref);
         let mesh: &Arc<Mesh> = lightmap.and_then(|l| l.mesh.as_ref()).unwrap_or(&inst.mesh);
         if mesh.indices.is_empty() || mesh.positions.is_empty() {
             continue; // glTF accessors cannot be empty
         }
-        let mat = match material_ids.get(&Arc::as_ptr(&inst.material)) {
-            Some(&i) => i,
-            None => {
-                let v = material_json(&inst.material);
-                uses_strength |= v.get("extensions").is_some();
-                materials.push(v);
-                material_ids.insert(Arc::as_ptr(&inst.material), materials.len() - 1);
-                materials.len() - 1
-            }
-        };
-        let key = (Arc::as_ptr(mesh), Arc::as_ptr(&inst.material));
-        let mesh_id = match mesh_ids.get(&key) {
-            Some(&i) => i,
-            None => {
-                let flat3 = |v: &[Vec3]| v.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>();
-                let mut attributes = serde_json::Map::new();
-                attributes.insert(
-                    "POSITION".into(),
-                    b.floats(&flat3(&mesh.positions), 3, true).into(),
-                );
-                if mesh.normals.len() == mesh.positions.len() {
-                    attributes.insert(
-                        "NORMAL".into(),
-                        b.floats(&flat3(&mesh.normals), 3, false).into(),
-                    );
-                }
-                for (name, uv) in [("TEXCOORD_0", &mesh.uv0), ("TEXCOORD_1", &mesh.uv1)] {
-                    if !uv.is_empty() && uv.len() == mesh.positions.len() {
-                        let flat: Vec<f32> = uv.iter().flat_map(|t| t.to_array()).collect();
-                        attributes.insert(name.into(), b.floats(&flat, 2, false).into());
-                    }
-                }
-                let indices = b.indices(&mesh.indices);
-                meshes.push(json!({
-                    "name": mesh.name,
-                    "primitives": [{
-                        "attributes": attributes,
-                        "indices": indices,
-                        "material": mat,
-                        "mode": 4,
-                    }],
-                }));
-                mesh_ids.insert(key, meshes.len() - 1);
-                meshes.len() - 1
-            }
-        };
-        let mut node = json!({ "name": inst.name, "mesh": mesh_id });
-        let m = Mat4::from(inst.transform);
-        if m != Mat4::IDENTITY {
-            node["matrix"] = nums(&m.to_cols_array());
-        }
-        if let Some(l) = lightmap {
-            node["extras"] = json!({
-                "surfcache_lightmap": { "uri": l.uri, "uv_rect": nums(&l.uv_rect) }
-            });
-        }
-        nodes.push(node);
+        let mat = doc.material(&inst.material);
+        let mesh_id = doc.mesh(mesh, &inst.material, mat);
+        doc.nodes
+            .push(GltfDocument::instance_node(inst, mesh_id, lightmap));
     }
 
     let mut lights = Vec::new();
@@ -292,45 +364,16 @@ pub fn write_gltf(
         let (l, mut node) = light_json(light, k);
         lights.push(l);
         node["extensions"] = json!({ "KHR_lights_punctual": { "light": k } });
-        nodes.push(node);
+        doc.nodes.push(node);
     }
 
     let env = &scene.environment;
     let env_map_uri = env.map.as_ref().map(|_| format!("{stem}_environment.exr"));
-    let mut root = json!({
-        "asset": { "version": "2.0", "generator": "surfcache" },
-        "scene": 0,
-        "scenes": [{
-            "name": scene.name,
-            "nodes": (0..nodes.len()).collect::<Vec<_>>(),
-            "extras": { "surfcache_environment": {
-                "color": nums(&env.color.to_array()),
-                "intensity": num(env.intensity),
-                "map": env_map_uri,
-            }},
-        }],
-        "nodes": nodes,
-        "meshes": meshes,
-        "materials": materials,
-        "accessors": b.accessors,
-        "bufferViews": b.views,
-        "buffers": [{ "uri": bin_name, "byteLength": b.bin.len() }],
-    });
-    let mut used = Vec::new();
-    if !lights.is_empty() {
-        used.push("KHR_lights_punctual");
-        root["extensions"] = json!({ "KHR_lights_punctual": { "lights": lights } });
-    }
-    if uses_strength {
-        used.push("KHR_materials_emissive_strength");
-    }
-    if !used.is_empty() {
-        root["extensionsUsed"] = json!(used);
-    }
+    let root = doc.root(scene, &lights, &env_map_uri, &bin_name);
     let text = serde_json::to_string_pretty(&root).map_err(|e| IoError::write(path, e))?;
 
     // Companions first, the .gltf last: a .gltf on disk always has its files.
-    write_file_atomically(&path.with_file_name(&bin_name), &b.bin)?;
+    write_file_atomically(&path.with_file_name(&bin_name), &doc.b.bin)?;
     if let (Some(map), Some(uri)) = (&env.map, &env_map_uri) {
         write_rgb_exr(
             &path.with_file_name(uri),
