@@ -22,28 +22,27 @@
 //! `full_s=<seconds> incremental_s=<seconds> ratio=<incremental/full> rel_rms_vs_full=<value>`,
 //! where `full_s` is the from-scratch bake of the edited scene.
 
+#[path = "shared/sponza.rs"]
+mod sponza;
+
 use bevy_ecs::prelude::*;
 use std::{path::Path, sync::Arc, time::Duration};
 use surfcache::{
     cache::{Cache, CacheSettings, Method, SurfaceCache, bake::BakeSettings},
     cli::{
-        Comparison,
         camera::{Camera, default_view},
-        compare,
         picture::{auto_exposure, write_png},
         render_view, surface_radiance,
     },
     core::{
-        Environment, Mesh, Scene,
+        Scene,
         glam::{Affine3A, Vec3},
-        sampling::Rng,
         scenes,
     },
     ecs::{
         BakeConfig, BakeFinished, BakedSurfaceCache, InstanceName, SurfcachePlugin, WorldTransform,
         spawn_scene,
     },
-    io::{load_scene, read_environment_map},
     trace::TracedScene,
 };
 
@@ -87,132 +86,6 @@ fn picture(scene: &TracedScene, cache: &Cache, path: &Path) {
     write_png(path, 320, 320, &pixels, auto_exposure(&pixels)).expect("write the picture");
 }
 
-/// `a` against the reference `b` at `n` random surface points of `scene` in open air
-/// (front sides, area-weighted, [`TracedScene::in_open_air`]: points inside solids are
-/// filled by convention and seen by nobody; the metric of `surfcache compare`).
-fn compare_caches(scene: &TracedScene, a: &Cache, b: &Cache, n: usize) -> Comparison {
-    let areas = scene.area_distribution();
-    let mut rng = Rng::new(2026, 12);
-    let (mut result, mut reference) = (Vec::new(), Vec::new());
-    for _ in 0..1000 * n {
-        if result.len() == n {
-            break;
-        }
-        let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), true);
-        if scene.in_open_air(&p, 32, &mut rng) {
-            result.push((p.position, a.lookup(p.triangle, p.uv, true)));
-            reference.push((p.position, b.lookup(p.triangle, p.uv, true), None));
-        }
-    }
-    compare(&result, &reference)
-}
-
-/// [`compare_caches`] at `n` random points within `radius` of `centre` (rejection
-/// sampling of the same area-weighted points): the neighbourhood of the edit, where the
-/// edit's effect is not drowned by the noise of the whole scene.
-fn compare_near(
-    scene: &TracedScene,
-    a: &Cache,
-    b: &Cache,
-    n: usize,
-    (centre, radius): (Vec3, f32),
-) -> Comparison {
-    let areas = scene.area_distribution();
-    let mut rng = Rng::new(2026, 13);
-    let (mut result, mut reference) = (Vec::new(), Vec::new());
-    for _ in 0..1000 * n {
-        if result.len() == n {
-            break;
-        }
-        let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), true);
-        if p.position.distance(centre) <= radius && scene.in_open_air(&p, 32, &mut rng) {
-            result.push((p.position, a.lookup(p.triangle, p.uv, true)));
-            reference.push((p.position, b.lookup(p.triangle, p.uv, true), None));
-        }
-    }
-    compare(&result, &reference)
-}
-
-/// The sphere within 3 edited-instance radii of the named instance's centre.
-fn neighbourhood(scene: &TracedScene, name: &str) -> (Vec3, f32) {
-    let i = scene
-        .instance_names()
-        .iter()
-        .position(|n| n == name)
-        .expect("the edited instance");
-    let (lo, hi) = scene.instance_triangles()[i]
-        .clone()
-        .flat_map(|t| scene.positions()[t as usize])
-        .fold(
-            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(lo, hi), p| (lo.min(p), hi.max(p)),
-        );
-    (0.5 * (lo + hi), 1.5 * (hi - lo).length())
-}
-
-/// Splits the largest connected piece of `mesh` off: (the rest, the piece).
-fn split_largest_piece(mesh: &Mesh) -> (Mesh, Mesh) {
-    let mut parent: Vec<u32> = (0..mesh.positions.len() as u32).collect();
-    fn root(parent: &mut [u32], mut v: u32) -> u32 {
-        while parent[v as usize] != v {
-            parent[v as usize] = parent[parent[v as usize] as usize];
-            v = parent[v as usize];
-        }
-        v
-    }
-    for [a, b, c] in &mesh.indices {
-        for (x, y) in [(*a, *b), (*b, *c)] {
-            let (rx, ry) = (root(&mut parent, x), root(&mut parent, y));
-            parent[rx as usize] = ry;
-        }
-    }
-    let mut sizes = std::collections::HashMap::new();
-    for t in &mesh.indices {
-        *sizes.entry(root(&mut parent, t[0])).or_insert(0usize) += 1;
-    }
-    let (&largest, _) = sizes.iter().max_by_key(|(r, n)| (**n, **r)).unwrap();
-    let (mut rest, mut piece) = (mesh.clone(), mesh.clone());
-    rest.indices.clear();
-    piece.indices.clear();
-    for t in &mesh.indices {
-        if root(&mut parent, t[0]) == largest {
-            piece.indices.push(*t);
-        } else {
-            rest.indices.push(*t);
-        }
-    }
-    piece.name = format!("{}_piece", mesh.name);
-    (rest, piece)
-}
-
-/// Sponza under an HDR sky, with its largest round vase as an instance of its own.
-fn sponza() -> (Scene, String) {
-    let shared = Path::new("../shared/assets");
-    let mut scene = load_scene(
-        shared
-            .join("scenes/sponza_crytek/Sponza.gltf")
-            .to_str()
-            .unwrap(),
-    )
-    .expect("Sponza from ../shared/assets")
-    .scene;
-    let (map, _) = read_environment_map(&shared.join("envmaps/immenstadter_horn_1k.exr"))
-        .expect("an HDR map from ../shared/assets");
-    scene.environment = Environment::from_map(Arc::new(map));
-    let k = scene
-        .instances
-        .iter()
-        .position(|i| i.material.name == "vase_round")
-        .expect("Sponza's round vases");
-    let (rest, piece) = split_largest_piece(&scene.instances[k].mesh);
-    let mut vase = scene.instances[k].clone();
-    vase.name = "vase_round_piece".into();
-    vase.mesh = Arc::new(piece);
-    scene.instances[k].mesh = Arc::new(rest);
-    scene.instances.push(vase);
-    (scene, "vase_round_piece".into())
-}
-
 fn arg<'a>(args: &'a [String], name: &str) -> Option<&'a str> {
     args.iter()
         .position(|a| a == name)
@@ -238,10 +111,9 @@ fn main() {
         "sponza" => {
             // Sponza at `surfcache bake`'s defaults (the density budget fits the
             // lightmaps to 8 texels per metre), one round vase moved by 1 m.
-            let (scene, name) = sponza();
             (
-                scene,
-                name,
+                sponza::sponza(&["vase_round"]),
+                "vase_round_piece".to_string(),
                 Affine3A::from_translation(Vec3::new(1.0, 0.0, 0.0)),
             )
         }
@@ -310,16 +182,16 @@ fn main() {
     let (scratch_scene, scratch) = baked(&world2);
     assert_eq!(scratch_scene.positions(), edited.positions());
     picture(&scratch_scene, &scratch, &out.join("from_scratch.png"));
-    let error = compare_caches(&edited, &incremental, &scratch, 2000);
+    let error = sponza::compare_caches(&edited, &incremental, &scratch, 2000, None);
     // The cache before the edit, looked up on the edited scene (same triangles).
-    let stale = compare_caches(&edited, &cache, &scratch, 2000);
+    let stale = sponza::compare_caches(&edited, &cache, &scratch, 2000, None);
     println!(
         "from scratch: {:.1} s; incremental vs from scratch: rel_rms {:.4}, max {:.3} over {} points (the stale cache before the edit: rel_rms {:.4})",
         full.seconds, error.rel_rms, error.max_rel, error.points, stale.rel_rms
     );
-    let near = neighbourhood(&edited, &edited_name);
-    let near_error = compare_near(&edited, &incremental, &scratch, 2000, near);
-    let near_stale = compare_near(&edited, &cache, &scratch, 2000, near);
+    let near = sponza::neighbourhood(&edited, &edited_name);
+    let near_error = sponza::compare_caches(&edited, &incremental, &scratch, 2000, Some(near));
+    let near_stale = sponza::compare_caches(&edited, &cache, &scratch, 2000, Some(near));
     println!(
         "within {:.2} m of '{edited_name}' ({} points): incremental rel_rms {:.4} nrmse {:.4}, stale cache rel_rms {:.4} nrmse {:.4}",
         near.1,
@@ -335,8 +207,8 @@ fn main() {
         let (mut w, mut s) = world_with(&after_scene, other);
         run_until_baked(&mut w, &mut s);
         let other = baked(&w).1;
-        let floor = compare_caches(&edited, &other, &scratch, 2000);
-        let near_floor = compare_near(&edited, &other, &scratch, 2000, near);
+        let floor = sponza::compare_caches(&edited, &other, &scratch, 2000, None);
+        let near_floor = sponza::compare_caches(&edited, &other, &scratch, 2000, Some(near));
         println!(
             "noise floor: two from-scratch bakes with seeds 0 and 1 differ by rel_rms {:.4} (near the edit: rel_rms {:.4} nrmse {:.4})",
             floor.rel_rms, near_floor.rel_rms, near_floor.nrmse

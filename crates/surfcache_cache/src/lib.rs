@@ -108,6 +108,26 @@ pub enum SampleSite {
     },
 }
 
+/// What a sample held before an edit, in the first round of an incremental re-bake.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Prior {
+    /// Its estimate: kept where the edit cannot reach the sample, else updated by the
+    /// estimated change ([`surfcache_trace::estimate_change`]).
+    Estimated(Vec3),
+    /// A value filled from its neighbours (the sample was buried in other geometry):
+    /// kept, still buried, where the edit cannot reach the sample, else estimated afresh.
+    Filled(Vec3),
+}
+
+impl Prior {
+    /// The value before the edit.
+    pub fn value(self) -> Vec3 {
+        match self {
+            Prior::Estimated(v) | Prior::Filled(v) => v,
+        }
+    }
+}
+
 /// A sample a cache needs, with the key of its random stream.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SamplePoint {
@@ -115,9 +135,9 @@ pub struct SamplePoint {
     /// Stable identity: derive it from [`TracedScene::triangle_key`] and the sample's
     /// position in the cache, never from its position in a round.
     pub key: u64,
-    /// In the first round of an incremental re-bake ([`SurfaceCache::remap`]): the value
-    /// before the edit, to be updated by the estimated change rather than re-estimated.
-    pub prior: Option<Vec3>,
+    /// In the first round of an incremental re-bake ([`SurfaceCache::remap`]): what the
+    /// sample held before the edit.
+    pub prior: Option<Prior>,
     /// Exactly this many hemisphere samples, whatever their error (the cache decides
     /// where more are needed, e.g. after filtering); `None`: the estimator's own stopping
     /// rule.

@@ -17,6 +17,17 @@ use serde::{Deserialize, Serialize};
 /// One stored sample: red, green, blue as half-float bits.
 pub type StoredRgb = [u16; 3];
 
+/// Two stored values closer than this share of the larger one may differ by rounding
+/// alone (one unit in the last place of a half float, 2⁻¹⁰, twice over): an average of
+/// stored values stored again, say.
+pub const STORED_TOLERANCE: f32 = 1.0 / 512.0;
+
+/// The part of `a − b` beyond [`STORED_TOLERANCE`], per channel, as a magnitude.
+#[inline]
+pub fn stored_difference(a: Vec3, b: Vec3) -> Vec3 {
+    ((a - b).abs() - STORED_TOLERANCE * a.abs().max(b.abs())).max(Vec3::ZERO)
+}
+
 /// Bytes of one [`StoredRgb`].
 pub const STORED_RGB_BYTES: u64 = 6;
 

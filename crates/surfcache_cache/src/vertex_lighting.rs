@@ -25,8 +25,8 @@
 //! barycentric interpolation exactly.
 
 use crate::{
-    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SampleSite, SurfaceCache,
-    UNMAPPED,
+    CacheStats, Diagnostic, IrradianceTexture, Method, Prior, SamplePoint, SampleSite,
+    SurfaceCache, UNMAPPED,
     irradiance_map::EstimateTotals,
     mesh_colour,
     stored_rgb::{STORED_RGB_BYTES, StoreScale, StoredRgb},
@@ -180,7 +180,8 @@ impl SurfaceCache for VertexLighting {
                                 .priors
                                 .get(2 * id as usize + (!front) as usize)
                                 .copied()
-                                .flatten(),
+                                .flatten()
+                                .map(Prior::Estimated),
                             budget: None,
                         });
                     }

@@ -320,23 +320,33 @@ impl Baking {
     }
 }
 
-/// The box around the changed instances' triangles in the old and the new scene.
+/// What changed between the old and the new scene: the changed instances' triangles in
+/// each, and the box around them all (`None` when no triangle changed).
+struct ChangedRegion {
+    region: Option<(Vec3, Vec3)>,
+    old_triangles: Vec<u32>,
+    new_triangles: Vec<u32>,
+}
+
 fn changed_region(
     old: &TracedScene,
     old_entities: &[Entity],
     new: &TracedScene,
     new_entities: &[Entity],
     changed: &BTreeSet<Entity>,
-) -> (Option<(Vec3, Vec3)>, usize) {
+) -> ChangedRegion {
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    let mut triangles = 0;
-    for (scene, entities) in [(old, old_entities), (new, new_entities)] {
+    let mut triangles = [Vec::new(), Vec::new()];
+    for (side, (scene, entities)) in [(old, old_entities), (new, new_entities)]
+        .into_iter()
+        .enumerate()
+    {
         for (k, e) in entities.iter().enumerate() {
             if !changed.contains(e) {
                 continue;
             }
             for t in scene.instance_triangles()[k].clone() {
-                triangles += 1;
+                triangles[side].push(t);
                 for p in scene.positions()[t as usize] {
                     lo = lo.min(p);
                     hi = hi.max(p);
@@ -344,7 +354,12 @@ fn changed_region(
             }
         }
     }
-    ((triangles > 0).then_some((lo, hi)), triangles)
+    let [old_triangles, new_triangles] = triangles;
+    ChangedRegion {
+        region: (!old_triangles.is_empty() || !new_triangles.is_empty()).then_some((lo, hi)),
+        old_triangles,
+        new_triangles,
+    }
 }
 
 /// What a new traced scene needs.
@@ -371,7 +386,7 @@ fn plan(
     if baking.global || base.requested != config.settings {
         return full();
     }
-    let (region, changed_triangles) = changed_region(
+    let changes = changed_region(
         &base.scene,
         &base.entities,
         scene,
@@ -379,9 +394,10 @@ fn plan(
         &baking.changed,
     );
     let total = base.scene.triangle_count() + scene.triangle_count();
-    let Some(region) = region else {
+    let Some(region) = changes.region else {
         return Plan::Unchanged;
     };
+    let changed_triangles = changes.old_triangles.len() + changes.new_triangles.len();
     if changed_triangles as f32 > config.full_rebake_share * total as f32 {
         return full();
     }
@@ -399,6 +415,8 @@ fn plan(
         Edit {
             triangle_map: map,
             region,
+            changed_old: Arc::new(changes.old_triangles),
+            changed_new: Arc::new(changes.new_triangles),
         },
     );
     Plan::Bake(Job::Incremental(Box::new(job)), true)

@@ -14,6 +14,9 @@ pub struct BakeProgress {
     pub rounds: u32,
     /// Points estimated so far.
     pub points_done: u64,
+    /// Points whose estimates traced rays (in a re-bake, the points it touched; the
+    /// others kept their value).
+    pub points_traced: u64,
     /// Points of the current round still to estimate.
     pub points_pending: u64,
     /// Hemisphere samples and rays so far.
@@ -156,6 +159,7 @@ impl<C: SurfaceCache> Baker<C> {
         for e in &batch {
             self.progress.samples += e.samples as u64;
             self.progress.rays += e.rays;
+            self.progress.points_traced += (e.rays > 0) as u64;
         }
         self.progress.points_done += batch.len() as u64;
         self.estimates.extend(batch);

@@ -3,8 +3,8 @@
 //! of relative errors.
 
 use crate::{
-    SamplePoint, SampleSite, UNMAPPED,
-    incremental::{ChangePlan, INDIRECT_SKIP_SHARE},
+    Prior, SamplePoint, SampleSite, UNMAPPED,
+    incremental::{ChangePlan, Influence, SKIP_SHARE},
 };
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -118,6 +118,9 @@ pub struct Previous {
     /// keep their value, the others integrate over the cone it gives
     /// ([`crate::incremental::ChangeBound::plan`]).
     pub bound: Option<Arc<crate::incremental::ChangeBound>>,
+    /// Where the stage's change can reach: points it does not reach keep their value
+    /// without a ray ([`Influence::reaches`]).
+    pub influence: Option<Arc<Influence>>,
 }
 
 impl Previous {
@@ -132,24 +135,37 @@ impl Previous {
         seed: u64,
         gather: Option<&dyn IrradianceLookup>,
     ) -> Option<Estimate> {
-        let prior = p.prior?;
+        let (prior, estimated) = match p.prior? {
+            Prior::Estimated(v) => (v, true),
+            Prior::Filled(v) => (v, false),
+        };
         let old_site = map_site(&self.scene, scene, &p.site, &self.triangle_map)?;
         let (new_point, new_origin) = sample_frame(scene, &p.site);
         let (old_point, old_origin) = sample_frame(&self.scene, &old_site);
+        let allowance =
+            SKIP_SHARE * settings.max_rel_error * (prior.min_element().max(0.0) + settings.floor);
+        if let Some(influence) = &self.influence
+            && !influence.reaches(
+                new_point.triangle,
+                new_point.position,
+                new_point.geometric_normal,
+                allowance,
+            )
+        {
+            return Some(unchanged(prior, settings));
+        }
+        if !estimated {
+            return None;
+        }
         let new = PointInScene::new(scene, new_point, new_origin).with_gather(gather);
         let old = PointInScene::new(&self.scene, old_point, old_origin)
             .with_gather(self.gather.as_deref().map(|g| g as &dyn IrradianceLookup));
         let focus = match &self.bound {
-            Some(bound) => {
-                let allowance = INDIRECT_SKIP_SHARE
-                    * settings.max_rel_error
-                    * (prior.min_element().max(0.0) + settings.floor);
-                match bound.plan(new_origin, new_point.geometric_normal, allowance) {
-                    ChangePlan::Unchanged => return Some(unchanged(prior, settings)),
-                    ChangePlan::Cone(cone) => Some(cone),
-                    ChangePlan::Hemisphere => None,
-                }
-            }
+            Some(bound) => match bound.plan(new_origin, new_point.geometric_normal, allowance) {
+                ChangePlan::Unchanged => return Some(unchanged(prior, settings)),
+                ChangePlan::Cone(cone) => Some(cone),
+                ChangePlan::Hemisphere => None,
+            },
             None => self
                 .focus
                 .map(|(c, r)| Cone::towards_sphere(new_origin, c, r)),

@@ -133,8 +133,8 @@ pub(crate) fn step_pass<C: SurfaceCache>(
     let p = *b.progress();
     if std::env::var_os(TRACE_PASSES_VAR).is_some() {
         eprintln!(
-            "[pass {pass}] points {} samples {} rays {} rounds {}",
-            p.points_done, p.samples, p.rays, p.rounds
+            "[pass {pass}] points {} traced {} samples {} rays {} rounds {}",
+            p.points_done, p.points_traced, p.samples, p.rays, p.rounds
         );
     }
     done.samples += p.samples;

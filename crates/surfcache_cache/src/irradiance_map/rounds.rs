@@ -6,7 +6,7 @@ use super::{
     grid::{corner_of, for_each_new_sample, grid_index, grid_size, order_of_level, sample_key},
 };
 use crate::{
-    SamplePoint, SampleSite,
+    Prior, SamplePoint, SampleSite,
     burial::Burial,
     crossings::{self, SampleCrossing},
     stored_rgb::StoreScale,
@@ -135,7 +135,7 @@ impl IrradianceMaps {
                         front,
                     },
                     key: sample_key,
-                    prior: prior_base.map(|b| w.priors[b + m]),
+                    prior: prior_base.map(|b| Prior::Estimated(w.priors[b + m])),
                     budget: None,
                 });
             });

@@ -158,6 +158,7 @@ impl Lightmaps {
     fn drop_working_state(&mut self) {
         self.slots = Vec::new();
         self.priors = Vec::new();
+        self.prior_feet = Default::default();
         self.guide = Vec::new();
         self.pending = Vec::new();
         self.site_uv = Vec::new();

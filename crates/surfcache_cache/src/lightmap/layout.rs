@@ -63,6 +63,7 @@ impl Lightmaps {
             owner,
             sample_uv,
             priors: Vec::new(),
+            prior_feet: Default::default(),
             buried_slots: Vec::new(),
             slots: Vec::new(),
             plan: None,

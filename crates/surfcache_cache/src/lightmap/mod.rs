@@ -46,7 +46,7 @@ pub use rounds::{LATER_ROUNDS_GUESS, SamplingPlan};
 
 use crate::burial::Burial;
 use crate::{
-    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SurfaceCache, crossings,
+    CacheStats, Diagnostic, IrradianceTexture, Method, Prior, SamplePoint, SurfaceCache, crossings,
     filter::FilterSettings,
     stored_rgb::{StoreScale, StoredRgb},
 };
@@ -152,7 +152,11 @@ pub struct Lightmaps {
     sample_uv: Vec<Vec2>,
     /// Values before an edit per texel slot, for an incremental re-bake.
     #[serde(skip)]
-    priors: Vec<Option<Vec3>>,
+    priors: Vec<Option<Prior>>,
+    /// Before an edit, per texel slot of a kept layout: its crossing and the value at
+    /// the crossing's foot, the foot's prior where the crossing is the same after it.
+    #[serde(skip)]
+    prior_feet: std::collections::HashMap<u32, (crossings::SampleCrossing, Vec3)>,
     /// Texel slots whose estimate was buried (their stored value was filled from
     /// neighbours, so it is no prior for a change estimate).
     #[serde(skip)]

@@ -2,15 +2,16 @@
 //! priors, and the change of each triangle's texels between two bakes.
 
 use super::{BuiltInstance, Lightmaps, build_instance};
-use crate::UNMAPPED;
+use crate::{Prior, UNMAPPED, stored_rgb::stored_difference};
 use glam::{Vec2, Vec3};
 use surfcache_core::index::NO_INDEX;
 use surfcache_trace::TracedScene;
 
 impl Lightmaps {
     /// Instances whose triangles all correspond one to one (same mesh, same mirroring)
-    /// keep their layout, and their texels' values become priors; the others are laid out
-    /// afresh.
+    /// keep their layout, and their texels' values become priors (filled ones for texels
+    /// that were buried), as do the values at their crossings' feet; the others are laid
+    /// out afresh.
     pub(super) fn remapped(
         &self,
         old: &TracedScene,
@@ -47,29 +48,44 @@ impl Lightmaps {
             .collect();
         let mut fresh = Self::from_instances(new, self.settings, built);
         let mut priors = vec![None; fresh.layers * fresh.layer_texels];
+        let mut prior_feet = std::collections::HashMap::new();
         for (i, io) in reused.iter().enumerate() {
             let Some(io) = *io else { continue };
             let (m, m_old) = (fresh.maps[i], self.maps[io]);
             for layer in 0..fresh.layers.min(self.layers) {
                 let slice = self.texture_slice(layer, io);
-                for k in 0..m.texels() {
+                for (k, &stored) in slice.iter().enumerate().take(m.texels()) {
                     let old_slot = layer * self.layer_texels + m_old.offset + k;
+                    let slot = layer * fresh.layer_texels + m.offset + k;
+                    if fresh.owner[m.offset + k] == NO_INDEX {
+                        continue;
+                    }
+                    let value = self.scale.unpack(stored);
                     let buried = self.buried_slots.get(old_slot).copied().unwrap_or(true);
-                    if fresh.owner[m.offset + k] != NO_INDEX && !buried {
-                        priors[layer * fresh.layer_texels + m.offset + k] =
-                            Some(self.scale.unpack(slice[k]));
+                    priors[slot] = Some(if buried {
+                        Prior::Filled(value)
+                    } else {
+                        Prior::Estimated(value)
+                    });
+                    if let Some(&c) = self.crossing_slot.get(old_slot)
+                        && c != NO_INDEX
+                    {
+                        let foot = self.scale.unpack(self.crossing_feet[c as usize]);
+                        prior_feet.insert(slot as u32, (self.crossing_lines[c as usize], foot));
                     }
                 }
             }
             debug_assert_eq!((m.width, m.height), (m_old.width, m_old.height));
         }
         fresh.priors = priors;
+        fresh.prior_feet = prior_feet;
         fresh
     }
     /// Per triangle (of the scene `self` was laid out over): the largest change, in any
     /// channel and layer, of the texels a lookup on it can read (its UV1 box plus the
-    /// bilinear footprint), against `before` looked up on `triangle_map[t]`. Where the
-    /// layouts differ, the sum of both sides' largest values bounds the change.
+    /// bilinear footprint), against `before` looked up on `triangle_map[t]`, leaving out
+    /// differences within storage precision ([`stored_difference`]). Where the layouts
+    /// differ, the sum of both sides' largest values bounds the change.
     pub fn triangle_changes(&self, before: &Lightmaps, triangle_map: &[u32]) -> Vec<f32> {
         (0..self.triangle_instance.len())
             .map(|t| {
@@ -90,7 +106,7 @@ impl Lightmaps {
                     if same_layout {
                         let old = before.footprint(layer, t_old);
                         for (a, b) in after.zip(old) {
-                            change = change.max((a - b).abs().max_element());
+                            change = change.max(stored_difference(a, b).max_element());
                         }
                     } else {
                         let a = after.fold(0.0f32, |m, v| m.max(v.abs().max_element()));

@@ -3,7 +3,7 @@
 //! buried or moved and which need another round.
 
 use super::{LightmapSettings, Lightmaps, TexelGuides, estimates::TexelEstimate};
-use crate::{SamplePoint, SampleSite, burial::Burial, crossings, filter::FilterSettings};
+use crate::{Prior, SamplePoint, SampleSite, burial::Burial, crossings, filter::FilterSettings};
 use glam::Vec3;
 use surfcache_core::{index::NO_INDEX, sampling::splitmix64};
 use surfcache_trace::{Estimate, EstimatorSettings, TracedScene};
@@ -139,6 +139,12 @@ impl Lightmaps {
             };
             let (layer, i) = (slot / self.layer_texels, slot % self.layer_texels);
             let texel = self.texel_point(scene, layer, i, 0, None);
+            // A re-bake keeps the foot's value where the crossing is the same.
+            let prior = self
+                .prior_feet
+                .get(&(slot as u32))
+                .filter(|(line, _)| *line == self.crossing_lines[c as usize])
+                .map(|&(_, foot)| Prior::Estimated(foot));
             points.push(SamplePoint {
                 site: SampleSite::Surface {
                     triangle: self.owner[i],
@@ -146,7 +152,7 @@ impl Lightmaps {
                     front: layer == 0,
                 },
                 key: splitmix64(texel.key ^ crossings::FOOT_KEY),
-                prior: None,
+                prior,
                 budget: foot_budget,
             });
             self.foot_lines.push(c);
@@ -200,7 +206,10 @@ impl Lightmaps {
             let slot = slot as usize;
             self.merged[slot].merge(e);
             if matches!(self.state[slot], Burial::Empty | Burial::Moved) {
-                let buried = e.back_face_share > self.settings.buried_threshold;
+                // A re-bake's buried texel that the edit did not reach stays buried.
+                let kept_buried =
+                    e.samples == 0 && matches!(self.priors.get(slot), Some(Some(Prior::Filled(_))));
+                let buried = e.back_face_share > self.settings.buried_threshold || kept_buried;
                 let exit = self.exits.get(slot).copied().flatten();
                 self.state[slot] = match (buried, exit, self.state[slot]) {
                     (false, _, _) => Burial::Valid,

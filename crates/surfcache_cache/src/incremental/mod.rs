@@ -29,23 +29,39 @@
 //!    caches ([`triangle_changes`]: the largest change anywhere on each triangle),
 //!    binned into [`ChangeBound`]'s cells, each a bounding sphere with the largest
 //!    `ΔL = ρ/π · ΔE` of its triangles. A point whose bound `Σ ΔL_c ∫_cone cos dω` is
-//!    within [`INDIRECT_SKIP_SHARE`] of its error bound keeps its value without a ray;
+//!    within [`SKIP_SHARE`] of its error bound keeps its value without a ray;
 //!    the others integrate over the cone towards the cells that carry the rest. Far from
 //!    a small edit (a vase moved in a large hall) most points are skipped this way.
+//!
+//! **Which points a stage touches.** Before each stage, its sources (the edited
+//! surfaces, then the surfaces whose irradiance the stage before changed) are traced
+//! forward ([`Influence`]). A point keeps its value, with no ray traced and no noise
+//! added, unless the forward hits near it estimate a change above its share of the error
+//! bound, a bright light's shadow from a source falls near it, or it lies on an edited
+//! surface. In a level, the points that face an edited prop but do not see it, most of
+//! them, are left alone this way.
 //!
 //! Points where estimating the change is dearer than estimating E afresh (a shadow moved
 //! onto them) are estimated afresh ([`surfcache_trace::estimate_change`]).
 //!
-//! Left out: changes that reach a sample over more bounces off the edited region than
-//! the stages carry, i.e. `ρ/π ∫ (E_new − E_last)(y)`; per indirect stage and point at
-//! most [`INDIRECT_SKIP_SHARE`] × the stage's bound × (E + ε), proven by
+//! Left out: points the forward rays miss although their change exceeds their share
+//! (module docs of [`Influence`]); changes that reach a sample over more bounces off the
+//! edited region than the stages carry, i.e. `ρ/π ∫ (E_new − E_last)(y)`; per indirect stage and point at
+//! most [`SKIP_SHARE`] × the stage's bound × (E + ε), proven by
 //! [`ChangeBound`]; and the noise of the change estimates, bounded by
 //! [`surfcache_trace::irradiance::CHANGE_ERROR_SHARE`] of the error bound each. Refinement (irradiance maps) continues as in a full bake where the
 //! updated values call for it.
 
+mod influence;
+
+pub use influence::{
+    BRIGHT_FACTOR, Influence, MAX_RAYS, MIN_RAYS, RAYS_PER_DISC, RAYS_PER_TRIANGLE,
+};
+
 use crate::{
     Cache, SurfaceCache, UNMAPPED,
     bake::{BakeOutcome, Baker, JobProgress, Previous, step_pass},
+    stored_rgb::stored_difference,
 };
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -60,11 +76,12 @@ pub const INDIRECT_STAGES: u32 = 3;
 /// The error bound of the indirect stages relative to the bake's.
 pub const INDIRECT_ERROR_FACTOR: f32 = 2.0;
 
-/// The share of a point's error bound (`bound · (E + ε)`, E's dimmest channel) that an
-/// indirect stage may leave out there: where [`ChangeBound`] proves the stage's change
-/// smaller, the point keeps its value; otherwise the change is integrated over the cone
-/// towards the cells that carry all but this much of it.
-pub const INDIRECT_SKIP_SHARE: f32 = 0.25;
+/// The share of a point's error bound (`bound · (E + ε)`, E's dimmest channel) that a
+/// stage may leave out there: where the stage's [`Influence`] or (indirect stages)
+/// [`ChangeBound`] finds the change smaller, the point keeps its value; otherwise the
+/// change is integrated over the cone towards the cells that carry all but this much
+/// of it.
+pub const SKIP_SHARE: f32 = 0.25;
 
 /// Cells per axis of [`ChangeBound`]'s grid.
 pub const CHANGE_CELLS: usize = 8;
@@ -77,6 +94,9 @@ pub struct Edit {
     /// A box (min, max) holding every surface that moved, appeared, disappeared or
     /// changed material, before and after the edit.
     pub region: (Vec3, Vec3),
+    /// Those surfaces' triangles in the scene before the edit and in the edited one.
+    pub changed_old: Arc<Vec<u32>>,
+    pub changed_new: Arc<Vec<u32>>,
 }
 
 /// A cache of the scene before an edit, looked up on the edited scene's triangles
@@ -106,6 +126,8 @@ pub struct IncrementalJob {
     stages: Vec<Arc<Cache>>,
     done: JobProgress,
     result: Option<Arc<Cache>>,
+    /// Rays traced to find each stage's [`Influence`].
+    influence_rays: u64,
 }
 
 impl IncrementalJob {
@@ -124,6 +146,7 @@ impl IncrementalJob {
                 ..Default::default()
             },
             result: None,
+            influence_rays: 0,
         }
     }
 
@@ -132,6 +155,16 @@ impl IncrementalJob {
             cache: self.before.cache().clone(),
             triangle_map: self.edit.triangle_map.clone(),
         })
+    }
+
+    /// The smallest radius R within which forward hits count for a point
+    /// ([`Influence`]): the cache's sample spacing, or for vertex lighting a 256th of the
+    /// scene's diagonal.
+    fn sample_spacing(&self, scene: &TracedScene) -> f32 {
+        match self.before.settings.cache.density() {
+            Some(d) if d > 0.0 => 1.0 / d,
+            _ => scene.diagonal() / 256.0,
+        }
     }
 
     fn start_stage(&mut self, scene: &Arc<TracedScene>) {
@@ -146,6 +179,17 @@ impl IncrementalJob {
                 .before
                 .cache()
                 .remap(&self.old_scene, scene, &self.edit.triangle_map);
+            let influence = Influence::of_edit(
+                &self.old_scene,
+                scene,
+                self.before.cache().as_ref(),
+                self.old_lookup().as_ref(),
+                &self.edit.changed_old,
+                &self.edit.changed_new,
+                self.sample_spacing(scene),
+                settings.seed,
+            );
+            self.influence_rays += influence.rays();
             Baker::new(cache, settings.estimator, settings.seed)
                 .with_gather(self.old_lookup())
                 .with_previous(Previous {
@@ -154,6 +198,7 @@ impl IncrementalJob {
                     gather: Some(self.before.cache().clone()),
                     focus: Some(sphere),
                     bound: None,
+                    influence: Some(Arc::new(influence)),
                 })
         } else {
             let k = self.stage as usize;
@@ -177,6 +222,18 @@ impl IncrementalJob {
                 _ => triangle_changes(&latest, &self.stages[k - 2], &identity),
             };
             let bound = ChangeBound::new(scene, &changes);
+            // Changes a quarter of the smallest allowance at most, all of them together.
+            let negligible = 0.25 * SKIP_SHARE * estimator.max_rel_error * estimator.floor;
+            let influence = Influence::of_changes(
+                scene,
+                latest.as_ref(),
+                before.as_ref(),
+                &changes,
+                negligible,
+                self.sample_spacing(scene),
+                settings.seed ^ k as u64,
+            );
+            self.influence_rays += influence.rays();
             Baker::new(
                 cache,
                 estimator,
@@ -189,6 +246,7 @@ impl IncrementalJob {
                 gather: Some(before),
                 focus: None,
                 bound: Some(Arc::new(bound)),
+                influence: Some(Arc::new(influence)),
             })
         };
         self.baker = Some(baker);
@@ -247,7 +305,8 @@ impl IncrementalJob {
 
 /// Per triangle of `after`'s scene: the largest change, in any channel and on either
 /// side, between lookups of `after` on it and of `before` on `triangle_map[t]`
-/// (zero where the triangle did not exist before), anywhere on the triangle. Exact for
+/// (zero where the triangle did not exist before), anywhere on the triangle, leaving out
+/// differences within storage precision ([`stored_difference`]). Exact for
 /// vertex lighting and irradiance maps (both interpolate linearly between grid nodes, so
 /// the difference peaks at the nodes of the finer grid) and an upper bound for lightmaps
 /// (the texels a lookup can read).
@@ -277,10 +336,10 @@ pub fn triangle_changes(after: &Cache, before: &Cache, triangle_map: &[u32]) -> 
                             UNMAPPED => Vec3::ZERO,
                             _ => before.lookup(t_old, uv, front),
                         };
-                        let d = after.lookup(t, uv, front) - old;
+                        let new = after.lookup(t, uv, front);
                         // An unbaked side (NaN lookups) may hold anything.
-                        change = change.max(if d.is_finite() {
-                            d.abs().max_element()
+                        change = change.max(if (new - old).is_finite() {
+                            stored_difference(new, old).max_element()
                         } else {
                             f32::INFINITY
                         });

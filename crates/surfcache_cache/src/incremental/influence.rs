@@ -1,0 +1,522 @@
+//! Where an edit's change can reach, traced forward from what changed (docs/design.md,
+//! Incremental re-baking).
+//!
+//! In every stage of a re-bake, a point's change is an integral over the directions in
+//! which it sees a *source*: the surfaces the edit moved, added or removed (the direct
+//! stage), or the surfaces whose irradiance changed in the stage before (the indirect
+//! stages). A bound from the sources' extent alone cannot know what hides them from a
+//! point, and in a level most points that face an edited prop do not see it. So the
+//! sources are traced forward instead. N rays leave them, cosine-distributed about the
+//! side they leave, and each hit x carries a weight w. By reciprocity, the hits per unit
+//! area at x are N/(πA) times the projected solid angle of the source seen from x (A its
+//! area, both sides). So the weights of the hits within a radius R of a point, summed and
+//! divided by πR², estimate
+//!
+//! `Q(x) = |∫ ΔL(ω) cos θ dω|`
+//!
+//! over the directions in which x sees a source, per channel ([`Influence::reaches`]).
+//! The weights are signed: a prop moved by a metre darkens one patch of floor and
+//! lights the one next to it, and far away the two nearly cancel, as they do in the
+//! change itself.
+//!
+//! - **Direct stage** ([`Influence::of_edit`]). Source points s are drawn uniformly by area
+//!   over both sides of the changed triangles: before the edit in the old scene, after
+//!   it in the edited one. Rays leave in cosine directions. At each hit x, the stage's own
+//!   integrand is evaluated along the reversed ray in both scenes:
+//!   `ΔL = L_new − L_old`, with `L = L_e + ρ/π · E_old` at the first hit. Then
+//!   `w = πA·|ΔL| / N`. Where s is a prop that moved away, the new scene's ray passes
+//!   through and finds what the prop hid.
+//! - **Bright lights** are not found by cosine directions: the sun of a sky map (pixels
+//!   above [`BRIGHT_FACTOR`] × the map's mean) and punctual lights. Their shadows are
+//!   traced from the sources away from the light, and every point within R of such a
+//!   hit is re-estimated outright.
+//! - **Indirect stages** ([`Influence::of_changes`]). A source triangle t is drawn in
+//!   proportion to `ΔL_t · A_t`, with `ΔL_t = ρ_t/π · ΔE_t` and ΔE_t the largest change on
+//!   it. A hit then carries `w = πΦ/N · ΔL(s)/ΔL_t`, where `Φ = Σ ΔL_t · A_t` over both
+//!   sides and ΔL(s) is the signed change where the ray left.
+//!
+//! A point is re-estimated when `Q + 2σ_Q` exceeds its allowance (σ_Q from the sum of
+//! w²), when a shadow hit lies within R, or when it lies on a changed triangle itself.
+//!
+//! What is approximated: Q is estimated, not bounded. A point whose change is above
+//! its allowance is still missed when none of the N rays lands within R of it. The
+//! number of rays is chosen so that this takes a view of the source far smaller than the
+//! allowance allows: [`RAYS_PER_DISC`] rays per disc of radius R on the sources.
+
+use glam::{IVec3, Vec3};
+use rayon::prelude::*;
+use std::{collections::HashMap, f32::consts::PI, ops::Range};
+use surfcache_core::Light;
+use surfcache_core::{
+    EnvironmentSampler,
+    color::luminance,
+    geometry::{to_world, triangle_area},
+    sampling::{Distribution1D, Rng, cosine_hemisphere, splitmix64, uniform_triangle},
+};
+use surfcache_trace::{IrradianceLookup, PathOptions, SurfacePoint, TracedScene};
+
+/// Forward rays per disc of radius R of source area (module docs).
+pub const RAYS_PER_DISC: f32 = 2048.0;
+
+/// Fewest and most forward rays of a stage, the most also at most [`RAYS_PER_TRIANGLE`]
+/// per triangle of the scene. R starts at the cache's sample spacing and grows where the
+/// sources are too large for [`RAYS_PER_DISC`] within the most.
+pub const MIN_RAYS: u32 = 1 << 16;
+pub const MAX_RAYS: u32 = 1 << 21;
+pub const RAYS_PER_TRIANGLE: u32 = 8;
+
+/// Sky-map pixels brighter than this many times the map's mean luminance count as a
+/// bright light whose shadows are traced (module docs).
+pub const BRIGHT_FACTOR: f32 = 16.0;
+
+/// Hits a grid cell keeps of each kind, finite and infinite ([`Influence`]'s binning).
+pub const HITS_PER_CELL: usize = 64;
+
+/// Shadow rays per bright light, as a share of the forward rays.
+const SHADOW_SHARE: f32 = 0.25;
+
+/// Points whose changes a stage of a re-bake must estimate (module docs).
+pub struct Influence {
+    radius: f32,
+    /// Hits sorted by grid cell (cell size R); each cell's range of them.
+    cells: HashMap<IVec3, Range<u32>>,
+    position: Vec<Vec3>,
+    normal: Vec<Vec3>,
+    /// `w` of each hit, per channel and signed; infinite for a bright light's shadow.
+    weight: Vec<Vec3>,
+    /// Per triangle of the edited scene: a changed triangle, always re-estimated.
+    changed: Vec<bool>,
+    rays: u64,
+}
+
+/// One forward hit: where, the normal of the side it arrived at, its weight.
+#[derive(Clone, Copy)]
+struct ForwardHit {
+    position: Vec3,
+    normal: Vec3,
+    weight: Vec3,
+}
+
+impl ForwardHit {
+    fn certain(&self) -> bool {
+        self.weight.x == f32::INFINITY
+    }
+}
+
+/// The sides of some triangles of a scene, drawn by weight × area.
+struct SourceSides<'a> {
+    scene: &'a TracedScene,
+    triangles: Vec<u32>,
+    choice: Distribution1D,
+    /// Σ weight × area over both sides.
+    total: f32,
+    /// Σ area over both sides.
+    area: f32,
+}
+
+impl<'a> SourceSides<'a> {
+    fn new(scene: &'a TracedScene, triangles: &[u32], weight: impl Fn(u32) -> f32) -> Self {
+        let triangles: Vec<u32> = triangles
+            .iter()
+            .copied()
+            .filter(|&t| weight(t) > 0.0)
+            .collect();
+        let areas: Vec<f32> = triangles
+            .iter()
+            .map(|&t| {
+                let [a, b, c] = scene.positions()[t as usize];
+                triangle_area(a, b, c)
+            })
+            .collect();
+        let weighted: Vec<f32> = triangles
+            .iter()
+            .zip(&areas)
+            .map(|(&t, &a)| weight(t) * a)
+            .collect();
+        Self {
+            scene,
+            choice: Distribution1D::new(&weighted),
+            total: 2.0 * weighted.iter().sum::<f32>(),
+            area: 2.0 * areas.iter().sum::<f32>(),
+            triangles,
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.triangles.is_empty() || self.total.is_nan() || self.total <= 0.0
+    }
+
+    /// A point on a side drawn by weight × area.
+    fn sample(&self, rng: &mut Rng) -> SurfacePoint {
+        let (k, _, _) = self.choice.sample(rng.next_f32());
+        let front = rng.next_f32() < 0.5;
+        self.scene
+            .surface_point(self.triangles[k], uniform_triangle(rng.next_vec2()), front)
+    }
+
+    /// This set's share of a stage's `rays` over sources of total area `area`.
+    fn share(&self, rays: u32, area: f32) -> u32 {
+        if self.is_empty() {
+            0
+        } else {
+            ((rays as f64 * (self.area / area) as f64).ceil() as u32).max(1)
+        }
+    }
+
+    /// A cosine-distributed ray leaving the source point `p` on its side: origin,
+    /// direction.
+    fn leave(&self, p: &SurfacePoint, rng: &mut Rng) -> (Vec3, Vec3) {
+        let d = to_world(cosine_hemisphere(rng.next_vec2()), p.geometric_normal);
+        (self.scene.spawn_origin(p), d)
+    }
+}
+
+/// A stage's forward rays and radius R for sources of total `area` (both sides):
+/// [`RAYS_PER_DISC`] per disc of radius R, R at least `spacing`, the rays within
+/// [`MIN_RAYS`]..=[`MAX_RAYS`] and [`RAYS_PER_TRIANGLE`] per triangle of the scene.
+fn rays_and_radius(area: f32, spacing: f32, triangles: usize) -> (u32, f32) {
+    let most = (RAYS_PER_TRIANGLE as usize * triangles).clamp(MIN_RAYS as usize, MAX_RAYS as usize);
+    let discs = area / (PI * spacing * spacing);
+    let rays = (discs * RAYS_PER_DISC).clamp(MIN_RAYS as f32, most as f32);
+    let radius = (RAYS_PER_DISC * area / (PI * rays)).sqrt().max(spacing);
+    (rays as u32, radius)
+}
+
+/// Where the ray (`origin`, `direction`) first meets a surface of `scene`: the point on
+/// the side it arrived at.
+fn first_hit(scene: &TracedScene, origin: Vec3, direction: Vec3) -> Option<SurfacePoint> {
+    let hit = scene.closest_hit(origin, direction, f32::INFINITY)?;
+    Some(scene.hit_point(&hit, direction))
+}
+
+impl Influence {
+    /// The direct stage's influence of an edit (module docs): the triangles `changed_old`
+    /// of `old` and `changed_new` of `new` traced forward, the change at each hit
+    /// evaluated with the old cache (`old_lookup` on `old`, `new_lookup` on `new`), and
+    /// the shadows of bright lights.
+    #[allow(clippy::too_many_arguments)]
+    pub fn of_edit(
+        old: &TracedScene,
+        new: &TracedScene,
+        old_lookup: &dyn IrradianceLookup,
+        new_lookup: &dyn IrradianceLookup,
+        changed_old: &[u32],
+        changed_new: &[u32],
+        spacing: f32,
+        seed: u64,
+    ) -> Self {
+        let mut hits = Vec::new();
+        let mut rays = 0u64;
+        let options = PathOptions {
+            max_bounces: None,
+            next_event: false,
+        };
+        let sets = [
+            SourceSides::new(old, changed_old, |_| 1.0),
+            SourceSides::new(new, changed_new, |_| 1.0),
+        ];
+        let area: f32 = sets.iter().map(|s| s.area).sum();
+        let (total_rays, radius) = rays_and_radius(area, spacing, new.triangle_count());
+        for (k, sources) in sets.iter().enumerate() {
+            let scene = sources.scene;
+            let n = sources.share(total_rays, area);
+            if n == 0 {
+                continue;
+            }
+            let weight = PI * sources.area / n as f32;
+            let stream = splitmix64(seed ^ 0x696e_666c_7565_6e63 ^ k as u64);
+            let found: Vec<(Option<ForwardHit>, u64)> = (0..n)
+                .into_par_iter()
+                .map(|i| {
+                    let mut rng = Rng::new(stream, i as u64);
+                    let s = sources.sample(&mut rng);
+                    let (o, d) = sources.leave(&s, &mut rng);
+                    let Some(x) = first_hit(scene, o, d) else {
+                        return (None, 1);
+                    };
+                    // The stage's integrand along the reversed ray, in both scenes, with
+                    // the same random numbers.
+                    let from = scene.spawn_origin(&x);
+                    let mut twin = rng.clone();
+                    let l_new =
+                        new.incident_radiance(from, -d, None, &mut rng, options, Some(new_lookup));
+                    let l_old =
+                        old.incident_radiance(from, -d, None, &mut twin, options, Some(old_lookup));
+                    let change = l_new.radiance - l_old.radiance;
+                    let hit = ForwardHit {
+                        position: x.position,
+                        normal: x.geometric_normal,
+                        weight: weight * change,
+                    };
+                    let traced = 1 + l_new.rays as u64 + l_old.rays as u64;
+                    ((change != Vec3::ZERO).then_some(hit), traced)
+                })
+                .collect();
+            for (hit, traced) in found {
+                rays += traced;
+                hits.extend(hit);
+            }
+            let shadows = shadow_hits(sources, (n as f32 * SHADOW_SHARE) as u32, stream);
+            rays += shadows.1;
+            hits.extend(shadows.0);
+        }
+        let mut changed = vec![false; new.triangle_count()];
+        for &t in changed_new {
+            changed[t as usize] = true;
+        }
+        Self::from_hits(hits, radius, changed, rays)
+    }
+
+    /// An indirect stage's influence (module docs): triangles of `scene` whose
+    /// irradiance changed by up to `changes[t]` ([`super::triangle_changes`]) traced
+    /// forward, each ray weighted by the signed change `after − before` at the point it
+    /// leaves. Triangles with `ρ·ΔE_t ≤ negligible` are left out: seen over a whole
+    /// hemisphere, all of them together change a point's E by at most that much.
+    #[allow(clippy::too_many_arguments)]
+    pub fn of_changes(
+        scene: &TracedScene,
+        after: &dyn IrradianceLookup,
+        before: &dyn IrradianceLookup,
+        changes: &[f32],
+        negligible: f32,
+        spacing: f32,
+        seed: u64,
+    ) -> Self {
+        let radiance = |t: u32| {
+            let albedo = scene.material_of(t).albedo.max_element().max(0.0);
+            albedo / PI * changes[t as usize]
+        };
+        let changed: Vec<u32> = (0..changes.len() as u32)
+            .filter(|&t| {
+                let most = PI * radiance(t);
+                most.is_nan() || most > negligible
+            })
+            .collect();
+        let mut hits = Vec::new();
+        let mut rays = 0;
+        // A change that is not a number (an unbaked side) may be anything: whatever its
+        // triangles see is re-estimated.
+        let unknown: Vec<u32> = changed
+            .iter()
+            .copied()
+            .filter(|&t| !radiance(t).is_finite())
+            .collect();
+        let sources = SourceSides::new(scene, &changed, |t| {
+            let l = radiance(t);
+            if l.is_finite() { l } else { 0.0 }
+        });
+        let stream = splitmix64(seed ^ 0x696e_6469_7265_6374);
+        let sets = [
+            (sources, false),
+            (SourceSides::new(scene, &unknown, |_| 1.0), true),
+        ];
+        let area: f32 = sets.iter().map(|(s, _)| s.area).sum();
+        let (total_rays, radius) = rays_and_radius(area, spacing, scene.triangle_count());
+        for (sources, certain) in sets {
+            let n = sources.share(total_rays, area);
+            if n == 0 {
+                continue;
+            }
+            let scale = PI * sources.total / n as f32;
+            let found: Vec<Option<ForwardHit>> = (0..n)
+                .into_par_iter()
+                .map(|i| {
+                    let mut rng = Rng::new(stream ^ certain as u64, i as u64);
+                    let s = sources.sample(&mut rng);
+                    let (o, d) = sources.leave(&s, &mut rng);
+                    let weight = if certain {
+                        Vec3::INFINITY
+                    } else {
+                        // Drawn by the bound ΔL_t: the ray carries ΔL(s) / ΔL_t of it.
+                        let front =
+                            s.geometric_normal == scene.geometric_normals()[s.triangle as usize];
+                        let change = match (
+                            after.irradiance(s.triangle, s.uv, front),
+                            before.irradiance(s.triangle, s.uv, front),
+                        ) {
+                            (Some(a), Some(b)) => a - b,
+                            _ => return None,
+                        };
+                        let albedo = scene
+                            .material_of(s.triangle)
+                            .albedo_at(scene.uv0_at(s.triangle, s.uv));
+                        let delta = albedo / PI * change;
+                        scale * delta / radiance(s.triangle)
+                    };
+                    if weight == Vec3::ZERO || weight.is_nan() {
+                        return None;
+                    }
+                    first_hit(scene, o, d).map(|x| ForwardHit {
+                        position: x.position,
+                        normal: x.geometric_normal,
+                        weight,
+                    })
+                })
+                .collect();
+            rays += n as u64;
+            hits.extend(found.into_iter().flatten());
+        }
+        Self::from_hits(hits, radius, Vec::new(), rays)
+    }
+
+    /// Hits binned by grid cell of size R; a cell with more than [`HITS_PER_CELL`] finite
+    /// (or infinite) hits keeps an even subset of them, the finite ones' weights scaled so
+    /// that their sum stays the same in expectation: queries then cost a bounded amount,
+    /// however many rays a small scene concentrates.
+    fn from_hits(mut hits: Vec<ForwardHit>, radius: f32, changed: Vec<bool>, rays: u64) -> Self {
+        let cell = |p: Vec3| (p / radius).floor().as_ivec3();
+        hits.sort_by_key(|h| {
+            let c = cell(h.position);
+            (c.x, c.y, c.z, h.certain())
+        });
+        let mut kept: Vec<ForwardHit> = Vec::with_capacity(hits.len());
+        let mut cells = HashMap::new();
+        let mut start = 0;
+        for i in 1..=hits.len() {
+            let group_ends = i == hits.len()
+                || cell(hits[i].position) != cell(hits[start].position)
+                || hits[i].certain() != hits[start].certain();
+            if !group_ends {
+                continue;
+            }
+            let group = &hits[start..i];
+            let stride = group.len().div_ceil(HITS_PER_CELL);
+            let chosen = group.len().div_ceil(stride);
+            let scale = group.len() as f32 / chosen as f32;
+            let first = kept.len() as u32;
+            kept.extend(group.iter().step_by(stride).map(|h| ForwardHit {
+                weight: h.weight * scale,
+                ..*h
+            }));
+            let range = cells
+                .entry(cell(hits[start].position))
+                .or_insert(first..first);
+            range.end = kept.len() as u32;
+            start = i;
+        }
+        Self {
+            radius,
+            cells,
+            position: kept.iter().map(|h| h.position).collect(),
+            normal: kept.iter().map(|h| h.normal).collect(),
+            weight: kept.iter().map(|h| h.weight).collect(),
+            changed,
+            rays,
+        }
+    }
+
+    /// Rays traced to find the influence.
+    pub fn rays(&self) -> u64 {
+        self.rays
+    }
+
+    /// Whether the change at point `x` (unit normal `n`) of `triangle` of the edited
+    /// scene may exceed `allowance` (W/m²): on a changed triangle, or where
+    /// `Q + 2σ_Q > allowance` ([`Self::change_at`]).
+    pub fn reaches(&self, triangle: u32, x: Vec3, n: Vec3, allowance: f32) -> bool {
+        if self.changed.get(triangle as usize) == Some(&true) {
+            return true;
+        }
+        let (q, sigma) = self.change_at(x, n);
+        q + 2.0 * sigma > allowance
+    }
+
+    /// The estimate `Q(x) = |∫ ΔL cos θ dω|` at point `x` with unit normal `n` and its
+    /// standard error, in the channel where `Q + 2σ` is largest: the signed weights of the
+    /// hits within R on a side facing the same way (normals within 60°), summed over πR²
+    /// (module docs); infinite within R of a bright light's shadow hit.
+    pub fn change_at(&self, x: Vec3, n: Vec3) -> (f32, f32) {
+        let r2 = self.radius * self.radius;
+        let centre = (x / self.radius).floor().as_ivec3();
+        let (mut sum, mut squares) = (Vec3::ZERO, Vec3::ZERO);
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let Some(range) = self.cells.get(&(centre + IVec3::new(dx, dy, dz))) else {
+                        continue;
+                    };
+                    for i in range.start as usize..range.end as usize {
+                        if self.position[i].distance_squared(x) > r2 || self.normal[i].dot(n) < 0.5
+                        {
+                            continue;
+                        }
+                        let w = self.weight[i];
+                        if w.x == f32::INFINITY {
+                            return (f32::INFINITY, 0.0);
+                        }
+                        sum += w;
+                        squares += w * w;
+                    }
+                }
+            }
+        }
+        let disc = PI * r2;
+        let (q, sigma) = (sum.abs() / disc, squares.map(f32::sqrt) / disc);
+        let reach = q + 2.0 * sigma;
+        let c = if reach.x >= reach.y && reach.x >= reach.z {
+            0
+        } else if reach.y >= reach.z {
+            1
+        } else {
+            2
+        };
+        (q[c], sigma[c])
+    }
+}
+
+/// The direction towards a bright light from a source point, or `None` (a sky sample too
+/// dim to count).
+type TowardsLight<'a> = Box<dyn Fn(Vec3, &mut Rng) -> Option<Vec3> + Sync + 'a>;
+
+/// The shadows of bright lights cast by `sources` (module docs): `n` rays per light
+/// from source points away from the light; every hit is marked with an infinite weight.
+fn shadow_hits(sources: &SourceSides, n: u32, stream: u64) -> (Vec<ForwardHit>, u64) {
+    let scene = sources.scene;
+    let mut lights: Vec<TowardsLight> = Vec::new();
+    if let Some(map) = &scene.environment().map
+        && !scene.environment().is_black()
+    {
+        let sampler = EnvironmentSampler::new(map);
+        let cut = BRIGHT_FACTOR * sampler.mean_luminance();
+        if map.texels.iter().any(|&t| luminance(t) > cut) {
+            lights.push(Box::new(move |_, rng| {
+                let (w, _) = sampler.sample(rng.next_vec2());
+                (luminance(map.radiance(w)) > cut).then_some(w)
+            }));
+        }
+    }
+    for light in scene.lights() {
+        match *light {
+            Light::Directional { direction, .. } => {
+                lights.push(Box::new(move |_, _| Some(-direction.normalize())))
+            }
+            Light::Point { position, .. } | Light::Spot { position, .. } => {
+                lights.push(Box::new(move |s, _| (position - s).try_normalize()))
+            }
+        }
+    }
+    let mut hits = Vec::new();
+    let mut rays = 0u64;
+    for (k, towards) in lights.iter().enumerate() {
+        let found: Vec<Option<ForwardHit>> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let mut rng = Rng::new(stream ^ splitmix64(0x5ad0 + k as u64), i as u64);
+                let s = sources.sample(&mut rng);
+                let w = towards(s.position, &mut rng)?;
+                // Leave from the side that faces away from the light.
+                let front = scene.geometric_normals()[s.triangle as usize].dot(w) < 0.0;
+                let away = scene.surface_point(s.triangle, s.uv, front);
+                let x = first_hit(scene, scene.spawn_origin(&away), -w)?;
+                Some(ForwardHit {
+                    position: x.position,
+                    normal: x.geometric_normal,
+                    weight: Vec3::INFINITY,
+                })
+            })
+            .collect();
+        rays += n as u64;
+        hits.extend(found.into_iter().flatten());
+    }
+    (hits, rays)
+}
