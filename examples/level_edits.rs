@@ -274,7 +274,10 @@ fn main() {
             incremental_s / full_s,
             err.median_rel,
         );
-        println!("{line} err_near={:.4}", err_near.median_rel);
+        println!(
+            "{line} err_near={:.4} (whole level: p90 {:.4}, rel_rms {:.4}; near: p90 {:.4}, rel_rms {:.4})",
+            err_near.median_rel, err.p90_rel, err.rel_rms, err_near.p90_rel, err_near.rel_rms
+        );
         lines.push((format!("{line} err_near={:.4}", err_near.median_rel), near));
     }
     if args.iter().any(|a| a == "--no-noise-floor") {
@@ -290,11 +293,17 @@ fn main() {
     );
     println!("base bake with seed 1: {s:.1} s");
     let t = &base_pair.0.traced;
-    let floor = sponza::compare_caches(t, other.cache(), &base_pair.1, POINTS, None).median_rel;
+    let floor = sponza::compare_caches(t, other.cache(), &base_pair.1, POINTS, None);
+    println!(
+        "noise floor over the whole level: median {:.4}, p90 {:.4}, rel_rms {:.4}",
+        floor.median_rel, floor.p90_rel, floor.rel_rms
+    );
     for (line, near) in lines {
-        let near =
-            sponza::compare_caches(t, other.cache(), &base_pair.1, POINTS, Some(near)).median_rel;
+        let near = sponza::compare_caches(t, other.cache(), &base_pair.1, POINTS, Some(near));
         let (head, err_near) = line.split_once(" err_near=").unwrap();
-        println!("{head} noise_floor={floor:.4} err_near={err_near} noise_near={near:.4}");
+        println!(
+            "{head} noise_floor={:.4} err_near={err_near} noise_near={:.4} (near: p90 {:.4}, rel_rms {:.4})",
+            floor.median_rel, near.median_rel, near.p90_rel, near.rel_rms
+        );
     }
 }

@@ -22,10 +22,12 @@ pub type StoredRgb = [u16; 3];
 /// stored values stored again, say.
 pub const STORED_TOLERANCE: f32 = 1.0 / 512.0;
 
-/// The part of `a − b` beyond [`STORED_TOLERANCE`], per channel, as a magnitude.
+/// The part of `|a − b|` beyond `share` (at least [`STORED_TOLERANCE`]) of the larger of
+/// the two, per channel.
 #[inline]
-pub fn stored_difference(a: Vec3, b: Vec3) -> Vec3 {
-    ((a - b).abs() - STORED_TOLERANCE * a.abs().max(b.abs())).max(Vec3::ZERO)
+pub fn difference_beyond(a: Vec3, b: Vec3, share: f32) -> Vec3 {
+    let share = share.max(STORED_TOLERANCE);
+    ((a - b).abs() - share * a.abs().max(b.abs())).max(Vec3::ZERO)
 }
 
 /// Bytes of one [`StoredRgb`].

@@ -61,13 +61,15 @@ pub use influence::{
 use crate::{
     Cache, SurfaceCache, UNMAPPED,
     bake::{BakeOutcome, Baker, JobProgress, Previous, step_pass},
-    stored_rgb::stored_difference,
+    stored_rgb::difference_beyond,
 };
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::{f32::consts::PI, sync::Arc};
 use surfcache_core::sampling::{Cone, splitmix64};
-use surfcache_trace::{EstimatorSettings, IrradianceLookup, TracedScene};
+use surfcache_trace::{
+    EstimatorSettings, IrradianceLookup, TracedScene, irradiance::CHANGE_ERROR_SHARE,
+};
 
 /// Indirect-change stages after the direct one: each propagates the previous stage's
 /// change by one more bounce (module docs).
@@ -217,9 +219,23 @@ impl IncrementalJob {
             };
             // What the stage integrates, ρ/π·(E_k − E_{k−1}) at first hits, bounded from
             // every stored sample of both caches.
+            // A change within twice the noise the stage before may have left in its
+            // estimates ([`CHANGE_ERROR_SHARE`] of its bound) is not passed on: noise
+            // would otherwise spread one stage further each time.
+            let noise = |bound: f32| 2.0 * CHANGE_ERROR_SHARE * bound;
             let changes = match k {
-                1 => triangle_changes(&latest, self.before.cache(), &self.edit.triangle_map),
-                _ => triangle_changes(&latest, &self.stages[k - 2], &identity),
+                1 => triangle_changes(
+                    &latest,
+                    self.before.cache(),
+                    &self.edit.triangle_map,
+                    noise(settings.estimator.max_rel_error),
+                ),
+                _ => triangle_changes(
+                    &latest,
+                    &self.stages[k - 2],
+                    &identity,
+                    noise(estimator.max_rel_error),
+                ),
             };
             let bound = ChangeBound::new(scene, &changes);
             // Changes a quarter of the smallest allowance at most, all of them together.
@@ -306,13 +322,19 @@ impl IncrementalJob {
 /// Per triangle of `after`'s scene: the largest change, in any channel and on either
 /// side, between lookups of `after` on it and of `before` on `triangle_map[t]`
 /// (zero where the triangle did not exist before), anywhere on the triangle, leaving out
-/// differences within storage precision ([`stored_difference`]). Exact for
+/// differences within `share` of the values ([`difference_beyond`]: at least storage
+/// precision; a re-bake passes the noise its change estimates may carry). Exact for
 /// vertex lighting and irradiance maps (both interpolate linearly between grid nodes, so
 /// the difference peaks at the nodes of the finer grid) and an upper bound for lightmaps
 /// (the texels a lookup can read).
-pub fn triangle_changes(after: &Cache, before: &Cache, triangle_map: &[u32]) -> Vec<f32> {
+pub fn triangle_changes(
+    after: &Cache,
+    before: &Cache,
+    triangle_map: &[u32],
+    share: f32,
+) -> Vec<f32> {
     if let (Cache::Lightmap(a), Cache::Lightmap(b)) = (after, before) {
-        return a.triangle_changes(b, triangle_map);
+        return a.triangle_changes(b, triangle_map, share);
     }
     let order = |cache: &Cache, t: u32, front: bool| match cache {
         Cache::IrradianceMap(m) => m.order(t, front),
@@ -339,7 +361,7 @@ pub fn triangle_changes(after: &Cache, before: &Cache, triangle_map: &[u32]) -> 
                         let new = after.lookup(t, uv, front);
                         // An unbaked side (NaN lookups) may hold anything.
                         change = change.max(if (new - old).is_finite() {
-                            stored_difference(new, old).max_element()
+                            difference_beyond(new, old, share).max_element()
                         } else {
                             f32::INFINITY
                         });

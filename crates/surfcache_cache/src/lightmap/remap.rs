@@ -2,7 +2,7 @@
 //! priors, and the change of each triangle's texels between two bakes.
 
 use super::{BuiltInstance, Lightmaps, build_instance};
-use crate::{Prior, UNMAPPED, stored_rgb::stored_difference};
+use crate::{Prior, UNMAPPED, stored_rgb::difference_beyond};
 use glam::{Vec2, Vec3};
 use surfcache_core::index::NO_INDEX;
 use surfcache_trace::TracedScene;
@@ -84,9 +84,14 @@ impl Lightmaps {
     /// Per triangle (of the scene `self` was laid out over): the largest change, in any
     /// channel and layer, of the texels a lookup on it can read (its UV1 box plus the
     /// bilinear footprint), against `before` looked up on `triangle_map[t]`, leaving out
-    /// differences within storage precision ([`stored_difference`]). Where the layouts
+    /// differences within `share` of the values ([`difference_beyond`]). Where the layouts
     /// differ, the sum of both sides' largest values bounds the change.
-    pub fn triangle_changes(&self, before: &Lightmaps, triangle_map: &[u32]) -> Vec<f32> {
+    pub fn triangle_changes(
+        &self,
+        before: &Lightmaps,
+        triangle_map: &[u32],
+        share: f32,
+    ) -> Vec<f32> {
         (0..self.triangle_instance.len())
             .map(|t| {
                 let t_old = triangle_map.get(t).copied().unwrap_or(UNMAPPED);
@@ -106,7 +111,7 @@ impl Lightmaps {
                     if same_layout {
                         let old = before.footprint(layer, t_old);
                         for (a, b) in after.zip(old) {
-                            change = change.max(stored_difference(a, b).max_element());
+                            change = change.max(difference_beyond(a, b, share).max_element());
                         }
                     } else {
                         let a = after.fold(0.0f32, |m, v| m.max(v.abs().max_element()));
