@@ -13,7 +13,7 @@
 use bevy_ecs::prelude::*;
 use std::{f32::consts::PI, sync::Arc, time::Duration};
 use surfcache::{
-    cache::{CacheSettings, Method, bake::BakeSettings},
+    cache::{CacheSettings, LightmapSettings, bake::BakeSettings},
     core::{
         Environment, Light, Material,
         glam::{Affine3A, Vec3},
@@ -29,8 +29,10 @@ fn main() {
     let mut world = World::new();
     let mut schedule = Schedule::default();
     // Texel lightmaps at 16 texels per metre; everything else at its defaults.
-    let mut cache = CacheSettings::for_method(Method::Lightmap);
-    cache.set_density(16.0);
+    let cache = CacheSettings::Lightmap(LightmapSettings {
+        texels_per_metre: 16.0,
+        ..Default::default()
+    });
     SurfcachePlugin::with_config(BakeConfig {
         settings: BakeSettings {
             cache,

@@ -123,7 +123,11 @@ fn main() {
         settings.cache.set_both_sides(false);
     }
     if let Some(d) = arg(&args, "--density") {
-        settings.cache.set_density(d.parse().expect("--density D"));
+        let density = settings
+            .cache
+            .density_mut()
+            .expect("--density applies to --method irradiance-map and lightmap only");
+        *density = d.parse().expect("--density D");
     }
     if let Some(b) = arg(&args, "--max-rel-error") {
         settings.estimator.max_rel_error = b.parse().expect("--max-rel-error B");

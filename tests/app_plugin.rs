@@ -10,7 +10,7 @@ use std::{
     time::{Duration, Instant},
 };
 use surfcache::{
-    cache::{CacheSettings, Method, bake::BakeSettings},
+    cache::{CacheSettings, LightmapSettings, bake::BakeSettings},
     core::{Environment, Material, Scene, scenes::square},
     ecs::{BakeConfig, BakeFinished, PublishedLightmaps, SurfcachePlugin, spawn_scene},
     trace::EstimatorSettings,
@@ -30,8 +30,10 @@ fn app_plugin_bakes_a_floor_under_a_uniform_sky() {
         floor,
         Material::diffuse("grey", Vec3::splat(0.5)),
     ));
-    let mut cache = CacheSettings::for_method(Method::Lightmap);
-    cache.set_density(8.0);
+    let cache = CacheSettings::Lightmap(LightmapSettings {
+        texels_per_metre: 8.0,
+        ..Default::default()
+    });
     let config = BakeConfig {
         settings: BakeSettings {
             cache,

@@ -4,7 +4,8 @@
 //! (or written by hand) and checks what a user sees: a non-zero exit status with exactly one
 //! stderr line `error: …` naming the file and the cause, and never a panic or backtrace.
 //! Inputs that are only doubtful (points/lines primitives, degenerate triangles, negative
-//! radiance) load with exactly one `warning: …` line and exit 0.
+//! radiance) load with exactly one `warning: …` line and exit 0. Bake options given with a
+//! method they do not apply to are errors of the same kind.
 
 mod common;
 
@@ -623,6 +624,61 @@ fn points_csv_with_bad_header() {
     );
     // And a good file for contrast: the same row under the right header runs.
     expect_clean_success(&reference("cornell", &points_csv(&dir), &[]));
+}
+
+// --- bake options that do not apply to the chosen method ----------------------------------
+
+/// `surfcache bake cornell ARGS… -o OUT`, with backtraces enabled.
+fn bake(out: &Path, args: &[&str]) -> Output {
+    Command::new(SURFCACHE)
+        .args(["bake", "cornell"])
+        .args(args)
+        .arg("-o")
+        .arg(out)
+        .env("RUST_BACKTRACE", "1")
+        .output()
+        .expect("the surfcache binary runs")
+}
+
+/// An option of one method given with another is an error, not silently ignored
+/// (docs/cli.md, `surfcache bake`), and nothing is written.
+#[test]
+fn bake_options_that_do_not_apply_to_the_method() {
+    let dir = temp_dir("bake_options_that_do_not_apply_to_the_method");
+    let out = dir.join("out");
+    let density = "--density applies to --method irradiance-map and lightmap only";
+    let interpolation = "--interpolation-error applies to --method irradiance-map only";
+    let share = "--no-share-corners applies to --method irradiance-map only";
+    let filter = "--filter-passes applies to --method lightmap only";
+    let guiding = "--no-guiding applies to --method lightmap only";
+    let cases: [(&[&str], &str); 9] = [
+        (&["--method", "vertex", "--density", "8"], density),
+        // Checked before the value: the option is wrong whatever its value.
+        (&["--method", "vertex", "--density", "0"], density),
+        (
+            &["--method", "vertex", "--interpolation-error", "0.1"],
+            interpolation,
+        ),
+        // The default method, lightmaps.
+        (&["--interpolation-error", "0.1"], interpolation),
+        (&["--method", "vertex", "--no-share-corners"], share),
+        (&["--method", "lightmap", "--no-share-corners"], share),
+        (
+            &["--method", "irradiance-map", "--filter-passes", "2"],
+            filter,
+        ),
+        (&["--method", "vertex", "--no-guiding"], guiding),
+        (&["--method", "irradiance-map", "--no-guiding"], guiding),
+    ];
+    for (args, message) in cases {
+        let line = expect_error(&bake(&out, args), &[message]);
+        assert_eq!(line, format!("error: {message}"), "{args:?}");
+        assert!(
+            std::fs::read_dir(&dir).unwrap().next().is_none(),
+            "{args:?} wrote into {}",
+            dir.display()
+        );
+    }
 }
 
 // --- text from files that a message quotes --------------------------------------------------

@@ -202,7 +202,10 @@ fn main() -> std::process::ExitCode {
     let mut plugin = SurfcacheBevyPlugin::default();
     if args.quick {
         plugin.config.settings.estimator.max_rel_error = 0.05;
-        plugin.config.settings.cache.set_density(4.0);
+        // The default method, lightmaps, at 4 texels per metre.
+        if let Some(density) = plugin.config.settings.cache.density_mut() {
+            *density = 4.0;
+        }
         plugin.config.settings.density_budget = None;
     }
     // Bevy resolves a relative asset folder against the executable's: make it absolute.

@@ -13,16 +13,18 @@ use surfcache_bevy::{
     BakeConfig, BakeFinished, LightBaking, LightmappedMesh, SceneSpawner, SurfcacheBevyPlugin,
     mesh::has_uv1,
 };
-use surfcache_cache::{CacheSettings, Method, bake::BakeSettings};
+use surfcache_cache::{CacheSettings, LightmapSettings, bake::BakeSettings};
 use surfcache_core::{Environment, Instance, Material, Scene, scenes};
 use surfcache_ecs::{PublishedLightmaps, PunctualLight};
 use surfcache_trace::EstimatorSettings;
 
 /// A coarse, quick bake: 12 texels per metre, a 3 % bound, full paths.
 fn config() -> BakeConfig {
-    let mut cache = CacheSettings::for_method(Method::Lightmap);
-    cache.set_density(12.0);
-    cache.set_both_sides(false);
+    let cache = CacheSettings::Lightmap(LightmapSettings {
+        texels_per_metre: 12.0,
+        both_sides: false,
+        ..Default::default()
+    });
     BakeConfig {
         settings: BakeSettings {
             cache,

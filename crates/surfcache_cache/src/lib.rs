@@ -269,7 +269,11 @@ pub struct Diagnostic {
     pub order: Option<u32>,
 }
 
-/// Settings of the cache to bake, one variant per [`Method`].
+/// Settings of the cache to bake, one variant per [`Method`]. Settings every cache has
+/// (sides, density where there is one) have methods here; the rest belong to one method and
+/// are reached through its own struct ([`Self::irradiance_map_mut`],
+/// [`Self::lightmap_mut`], …), so setting one on a cache it does not fit cannot pass
+/// silently.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "method", rename_all = "kebab-case")]
 pub enum CacheSettings {
@@ -305,24 +309,6 @@ impl CacheSettings {
         }
     }
 
-    /// Whether irradiance maps estimate a corner once for all triangles that may share it
-    /// ([`irradiance_map`] module docs, Shared corners; ignored by the other caches).
-    pub fn set_share_corners(&mut self, share: bool) {
-        if let Self::IrradianceMap(s) = self {
-            s.share_corners = share;
-        }
-    }
-
-    /// Spatial density: irradiance-map samples per metre, lightmap texels per metre
-    /// (vertex lighting has none; ignored).
-    pub fn set_density(&mut self, density: f32) {
-        match self {
-            Self::Vertex(_) => {}
-            Self::IrradianceMap(s) => s.density = density,
-            Self::Lightmap(s) => s.texels_per_metre = density,
-        }
-    }
-
     /// Whether both sides of every surface are baked.
     pub fn both_sides(&self) -> bool {
         match self {
@@ -342,34 +328,63 @@ impl CacheSettings {
         }
     }
 
-    /// Multiplies the spatial density (irradiance-map samples or lightmap texels per
-    /// metre) by `factor` (vertex lighting has none).
-    pub fn scale_density(&mut self, factor: f32) {
+    /// The spatial density to change in place (irradiance-map samples or lightmap texels
+    /// per metre), or `None` for vertex lighting, which has none: whoever sets a density
+    /// must say what happens when it does not apply.
+    pub fn density_mut(&mut self) -> Option<&mut f32> {
         match self {
-            Self::Vertex(_) => {}
-            Self::IrradianceMap(s) => s.density *= factor,
-            Self::Lightmap(s) => s.texels_per_metre *= factor,
+            Self::Vertex(_) => None,
+            Self::IrradianceMap(s) => Some(&mut s.density),
+            Self::Lightmap(s) => Some(&mut s.texels_per_metre),
         }
     }
 
-    /// Turns guided sampling off (only lightmaps guide; docs/design.md, Guiding).
-    pub fn disable_guiding(&mut self) {
-        if let Self::Lightmap(s) = self {
-            s.guiding = false;
+    /// The vertex-lighting settings, if this bakes vertex lighting.
+    pub fn vertex(&self) -> Option<&VertexLightingSettings> {
+        match self {
+            Self::Vertex(s) => Some(s),
+            _ => None,
         }
     }
 
-    /// The irradiance-map refinement bound (ignored by the other caches).
-    pub fn set_interpolation_error(&mut self, bound: f32) {
-        if let Self::IrradianceMap(s) = self {
-            s.interpolation_error = bound;
+    /// The vertex-lighting settings to change, if this bakes vertex lighting.
+    pub fn vertex_mut(&mut self) -> Option<&mut VertexLightingSettings> {
+        match self {
+            Self::Vertex(s) => Some(s),
+            _ => None,
         }
     }
 
-    /// The absolute floor ε of relative errors, W/m² (the estimator's).
-    pub fn set_floor(&mut self, floor: f32) {
-        if let Self::IrradianceMap(s) = self {
-            s.floor = floor;
+    /// The irradiance-map settings, if this bakes irradiance maps.
+    pub fn irradiance_map(&self) -> Option<&IrradianceMapSettings> {
+        match self {
+            Self::IrradianceMap(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// The irradiance-map settings to change (shared corners, interpolation error, floor),
+    /// if this bakes irradiance maps.
+    pub fn irradiance_map_mut(&mut self) -> Option<&mut IrradianceMapSettings> {
+        match self {
+            Self::IrradianceMap(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// The lightmap settings, if this bakes lightmaps.
+    pub fn lightmap(&self) -> Option<&LightmapSettings> {
+        match self {
+            Self::Lightmap(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// The lightmap settings to change (filter, guiding), if this bakes lightmaps.
+    pub fn lightmap_mut(&mut self) -> Option<&mut LightmapSettings> {
+        match self {
+            Self::Lightmap(s) => Some(s),
+            _ => None,
         }
     }
 }

@@ -48,12 +48,16 @@ pub struct BakeOptions {
     pub samples: Option<u32>,
     pub bounces: Option<u32>,
     pub seed: u64,
-    /// Irradiance-map samples or lightmap texels per metre (the method's own if `None`).
+    /// Irradiance-map samples or lightmap texels per metre (the method's own if `None`;
+    /// an error with vertex lighting).
     pub density: Option<f32>,
+    /// Irradiance maps: the refinement bound (the method's own if `None`; an error with
+    /// any other method).
     pub interpolation_error: Option<f32>,
     pub gather: u32,
     pub both_sides: bool,
-    /// Irradiance maps: estimate shared corners once (`--no-share-corners` turns it off).
+    /// Irradiance maps: estimate shared corners once (`--no-share-corners` turns it off;
+    /// `false` is an error with any other method).
     pub share_corners: bool,
     /// Lightmaps: passes of the texel filter (the cache's own if `None`).
     pub filter_passes: Option<u32>,
@@ -86,18 +90,29 @@ impl BakeOptions {
         }
         let mut cache = CacheSettings::for_method(self.method);
         cache.set_both_sides(self.both_sides);
-        cache.set_share_corners(self.share_corners);
+        if !self.share_corners {
+            let CacheSettings::IrradianceMap(maps) = &mut cache else {
+                bail!("--no-share-corners applies to --method irradiance-map only");
+            };
+            maps.share_corners = false;
+        }
         if let Some(d) = self.density {
+            let Some(density) = cache.density_mut() else {
+                bail!("--density applies to --method irradiance-map and lightmap only");
+            };
             if !(d.is_finite() && d > 0.0) {
                 bail!("--density must be a positive number");
             }
-            cache.set_density(d);
+            *density = d;
         }
         if let Some(e) = self.interpolation_error {
+            let CacheSettings::IrradianceMap(maps) = &mut cache else {
+                bail!("--interpolation-error applies to --method irradiance-map only");
+            };
             if !(e.is_finite() && e > 0.0) {
                 bail!("--interpolation-error must be a positive number");
             }
-            cache.set_interpolation_error(e);
+            maps.interpolation_error = e;
         }
         if let Some(n) = self.filter_passes {
             let CacheSettings::Lightmap(lightmap) = &mut cache else {
@@ -294,6 +309,88 @@ pub fn bake(
                 settings: outcome.settings,
                 seconds: done.seconds,
             }))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Options that change nothing, with `method`.
+    fn options(method: Method) -> BakeOptions {
+        BakeOptions {
+            method,
+            sampler: Sampler::default(),
+            max_rel_error: 0.01,
+            min_samples: None,
+            max_samples: None,
+            samples: None,
+            bounces: None,
+            seed: 0,
+            density: None,
+            interpolation_error: None,
+            gather: surfcache_cache::bake::DEFAULT_GATHER_PASSES,
+            both_sides: true,
+            share_corners: true,
+            filter_passes: None,
+            guiding: true,
+        }
+    }
+
+    fn error(options: &BakeOptions) -> String {
+        format!("{:#}", options.settings().unwrap_err())
+    }
+
+    #[test]
+    fn method_options_reach_their_cache() {
+        let mut maps = options(Method::IrradianceMap);
+        maps.density = Some(8.0);
+        maps.interpolation_error = Some(0.2);
+        maps.share_corners = false;
+        let settings = maps.settings().unwrap();
+        let s = settings.cache.irradiance_map().unwrap();
+        assert_eq!((s.density, s.interpolation_error), (8.0, 0.2));
+        assert!(!s.share_corners);
+        assert_eq!(settings.density_budget, None);
+
+        let mut lightmap = options(Method::Lightmap);
+        lightmap.density = Some(12.0);
+        lightmap.filter_passes = Some(2);
+        lightmap.guiding = false;
+        let settings = lightmap.settings().unwrap();
+        let s = settings.cache.lightmap().unwrap();
+        assert_eq!((s.texels_per_metre, s.filter.iterations), (12.0, 2));
+        assert!(!s.guiding);
+
+        // The defaults apply to every method.
+        for method in Method::ALL {
+            let settings = options(method).settings().unwrap();
+            assert_eq!(settings.cache, CacheSettings::for_method(method));
+        }
+    }
+
+    #[test]
+    fn method_options_with_another_method_are_errors() {
+        let mut o = options(Method::Vertex);
+        o.density = Some(8.0);
+        assert_eq!(
+            error(&o),
+            "--density applies to --method irradiance-map and lightmap only"
+        );
+        for method in [Method::Vertex, Method::Lightmap] {
+            let mut o = options(method);
+            o.interpolation_error = Some(0.1);
+            assert_eq!(
+                error(&o),
+                "--interpolation-error applies to --method irradiance-map only"
+            );
+            let mut o = options(method);
+            o.share_corners = false;
+            assert_eq!(
+                error(&o),
+                "--no-share-corners applies to --method irradiance-map only"
+            );
         }
     }
 }

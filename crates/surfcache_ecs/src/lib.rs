@@ -31,7 +31,10 @@
 //! // A quick, coarse bake for the example.
 //! let mut config = BakeConfig::default();
 //! config.settings.estimator.max_rel_error = 0.2;
-//! config.settings.cache.set_density(4.0);
+//! // Lightmaps (the default method) at 4 texels per metre.
+//! if let Some(density) = config.settings.cache.density_mut() {
+//!     *density = 4.0;
+//! }
 //! config.settings.gather_passes = 0;
 //! SurfcachePlugin::with_config(config).build(&mut world, &mut schedule);
 //! let entities = spawn_scene(&mut world, &scenes::cornell());

@@ -20,10 +20,13 @@ const BOUND: f32 = 0.05;
 /// Quick settings: coarse caches, a 5 % bound, full paths (no gathering pre-passes).
 fn settings(method: Method) -> BakeSettings {
     let mut cache = CacheSettings::for_method(method);
-    cache.set_density(match method {
-        Method::Lightmap => 12.0,
-        _ => 8.0,
-    });
+    // Vertex lighting has no density.
+    if let Some(density) = cache.density_mut() {
+        *density = match method {
+            Method::Lightmap => 12.0,
+            _ => 8.0,
+        };
+    }
     BakeSettings {
         cache,
         estimator: EstimatorSettings {

@@ -238,7 +238,10 @@ impl BakeJob {
         let mut s = self.settings;
         if let Some(f) = self.floor {
             s.estimator.floor = f;
-            s.cache.set_floor(f);
+            // Only irradiance maps bound a relative error of their own.
+            if let CacheSettings::IrradianceMap(m) = &mut s.cache {
+                m.floor = f;
+            }
         }
         s
     }
@@ -279,10 +282,16 @@ impl BakeJob {
             (s.cache, estimator)
         } else {
             let mut cache = s.cache;
-            cache.scale_density(BOUNCE_PASS_DENSITY);
+            // Coarser where the cache has a density (vertex lighting has none).
+            if let Some(density) = cache.density_mut() {
+                *density *= BOUNCE_PASS_DENSITY;
+            }
             // A bounce pass reaches the final cache only through gathers over whole
-            // hemispheres, which average its noise: guiding would cost more than it buys.
-            cache.disable_guiding();
+            // hemispheres, which average its noise: guiding would cost more than it buys
+            // (only lightmaps guide).
+            if let CacheSettings::Lightmap(lightmap) = &mut cache {
+                lightmap.guiding = false;
+            }
             (cache, bounce_pass_estimator(k, &s.estimator))
         };
         // Bounce passes draw from streams of their own, the same stream in every bounce
@@ -358,13 +367,13 @@ impl BakeJob {
             return true;
         }
         if self.floor.is_none() {
-            if let (Some(budget), Some(density)) =
-                (self.settings.density_budget, self.settings.cache.density())
-            {
+            // The budget fits the density of caches that have one (not vertex lighting).
+            if let (Some(budget), Some(density)) = (
+                self.settings.density_budget,
+                self.settings.cache.density_mut(),
+            ) {
                 let area = scene.area_distribution().total();
-                self.settings
-                    .cache
-                    .set_density(fitted_density(density, area, budget));
+                *density = fitted_density(*density, area, budget);
                 self.settings.density_budget = None;
             }
             let mean = mean_irradiance(scene, 512, self.settings.seed);
