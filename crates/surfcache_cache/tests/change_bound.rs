@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::PI;
+use common::{PI, square_projected_solid_angle};
 use surfcache_cache::incremental::{ChangeBound, ChangePlan};
 use surfcache_core::{
     Environment, Instance, Material, Scene,
@@ -31,26 +31,9 @@ fn floor_and_patch() -> TracedScene {
     .unwrap()
 }
 
-/// `∫ ρ/π ΔE cos θ dω` over the patch seen from floor point `x` (normal +Y), by the
-/// midpoint rule on a 200 × 200 grid: `cos θ_x cos θ_p dA / r²`.
+/// `∫ ρ/π ΔE cos θ dω` over the patch seen from floor point `x` (normal +Y).
 fn exact_change(x: Vec3, delta_e: f32) -> f32 {
-    let n = 200;
-    let cell = 0.5 / n as f32;
-    let mut sum = 0.0;
-    for i in 0..n {
-        for j in 0..n {
-            let p = Vec3::new(
-                -0.25 + (i as f32 + 0.5) * cell,
-                2.0,
-                -0.25 + (j as f32 + 0.5) * cell,
-            );
-            let d = p - x;
-            let r2 = d.length_squared();
-            let w = d / r2.sqrt();
-            sum += w.y * w.y * cell * cell / r2;
-        }
-    }
-    0.8 / PI * delta_e * sum
+    0.8 / PI * delta_e * square_projected_solid_angle(x)
 }
 
 #[test]

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::PI;
+use common::{PI, square_projected_solid_angle};
 use surfcache_cache::incremental::Influence;
 use surfcache_core::{
     Environment, Instance, Material, Scene,
@@ -32,27 +32,6 @@ fn traced(instances: Vec<Instance>, environment: Environment) -> TracedScene {
     .unwrap()
 }
 
-/// `∫ cos θ dω` over the 0.5 m square 2 m above the origin, seen from floor point `x`
-/// (normal +Y), by the midpoint rule on a 200 × 200 grid.
-fn projected_solid_angle(x: Vec3) -> f32 {
-    let n = 200;
-    let cell = 0.5 / n as f32;
-    let mut sum = 0.0;
-    for i in 0..n {
-        for j in 0..n {
-            let p = Vec3::new(
-                -0.25 + (i as f32 + 0.5) * cell,
-                2.0,
-                -0.25 + (j as f32 + 0.5) * cell,
-            );
-            let d = p - x;
-            let r2 = d.length_squared();
-            sum += (d.y / r2.sqrt()).powi(2) * cell * cell / r2;
-        }
-    }
-    sum
-}
-
 /// A black square hung 2 m above a floor under a uniform sky of radiance 1: wherever
 /// the floor sees it, it hides sky of radiance 1 behind radiance 0, so the change is
 /// |ΔL| = 1 over its projected solid angle.
@@ -73,7 +52,7 @@ fn forward_rays_estimate_the_change_a_new_surface_makes() {
     let influence = Influence::of_edit(&old, &new, &Uniform, &Uniform, &[], &[2, 3], 0.05, 7);
     for x in [0.0, 0.7, 1.5, 3.0] {
         let p = Vec3::new(x, 0.0, 0.3);
-        let exact = projected_solid_angle(p);
+        let exact = square_projected_solid_angle(p);
         let (q, sigma) = influence.change_at(p, Vec3::Y);
         assert!(
             (q - exact).abs() <= 4.0 * sigma + 0.05 * exact,

@@ -66,6 +66,28 @@ pub struct BakeOptions {
 }
 
 impl BakeOptions {
+    /// Every option as `surfcache bake` has it by default, but the method, the sampler,
+    /// the bound and the seed.
+    pub fn defaults(method: Method, sampler: Sampler, max_rel_error: f32, seed: u64) -> Self {
+        Self {
+            method,
+            sampler,
+            max_rel_error,
+            min_samples: None,
+            max_samples: None,
+            samples: None,
+            bounces: None,
+            seed,
+            density: None,
+            interpolation_error: None,
+            gather: surfcache_cache::bake::DEFAULT_GATHER_PASSES,
+            both_sides: true,
+            share_corners: true,
+            filter_passes: None,
+            guiding: true,
+        }
+    }
+
     /// Checks the options and turns them into the settings of a [`BakeJob`].
     pub fn settings(&self) -> Result<BakeSettings> {
         if !(self.max_rel_error.is_finite() && self.max_rel_error > 0.0) {
@@ -319,23 +341,7 @@ mod tests {
 
     /// Options that change nothing, with `method`.
     fn options(method: Method) -> BakeOptions {
-        BakeOptions {
-            method,
-            sampler: Sampler::default(),
-            max_rel_error: 0.01,
-            min_samples: None,
-            max_samples: None,
-            samples: None,
-            bounces: None,
-            seed: 0,
-            density: None,
-            interpolation_error: None,
-            gather: surfcache_cache::bake::DEFAULT_GATHER_PASSES,
-            both_sides: true,
-            share_corners: true,
-            filter_passes: None,
-            guiding: true,
-        }
+        BakeOptions::defaults(method, Sampler::default(), 0.01, 0)
     }
 
     fn error(options: &BakeOptions) -> String {

@@ -286,23 +286,7 @@ impl SceneSweep<'_> {
 /// The options of one bake of the sweep: every setting but the method, the sampler and
 /// the bound as `surfcache bake` has it by default.
 fn bake_options(method: Method, sampler: Sampler, bound: f32, seed: u64) -> BakeOptions {
-    BakeOptions {
-        method,
-        sampler,
-        max_rel_error: bound,
-        min_samples: None,
-        max_samples: None,
-        samples: None,
-        bounces: None,
-        seed,
-        density: None,
-        interpolation_error: None,
-        gather: surfcache_cache::bake::DEFAULT_GATHER_PASSES,
-        both_sides: true,
-        share_corners: true,
-        filter_passes: None,
-        guiding: true,
-    }
+    BakeOptions::defaults(method, sampler, bound, seed)
 }
 
 /// Why a bake stopped after `t` seconds at `progress`: over the scene's cap
