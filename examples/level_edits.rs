@@ -36,7 +36,6 @@ use surfcache::{
         Cache, CacheSettings, Method, SurfaceCache,
         bake::{BakeJob, BakeOutcome, BakeSettings},
         incremental::{Edit, IncrementalJob},
-        triangle_map,
     },
     core::{
         Material, Scene,
@@ -82,41 +81,20 @@ impl Level {
 /// An edit of `before` into `after`: instances correspond by name; `changed` names the
 /// instances the edit moved, added, removed or re-coloured.
 fn edit_between(before: &Level, after: &Level, changed: &BTreeSet<String>) -> Edit {
-    let instance_map: Vec<Option<u32>> = after
-        .scene
-        .instances
+    let names = |level: &Level| level.traced.instance_names().to_vec();
+    let (old_names, new_names) = (names(before), names(after));
+    let instance_map: Vec<Option<u32>> = new_names
         .iter()
-        .map(|i| {
-            before
-                .scene
-                .instances
-                .iter()
-                .position(|o| o.name == i.name)
-                .map(|k| k as u32)
-        })
+        .map(|n| old_names.iter().position(|o| o == n).map(|k| k as u32))
         .collect();
-    let triangles = |level: &Level| -> Vec<u32> {
-        let t = &level.traced;
-        (0..t.instance_names().len())
-            .filter(|&k| changed.contains(&t.instance_names()[k]))
-            .flat_map(|k| t.instance_triangles()[k].clone())
-            .collect()
-    };
-    let (changed_old, changed_new) = (triangles(before), triangles(after));
-    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    for (level, list) in [(before, &changed_old), (after, &changed_new)] {
-        for &t in list {
-            for p in level.traced.positions()[t as usize] {
-                (lo, hi) = (lo.min(p), hi.max(p));
-            }
-        }
-    }
-    Edit {
-        triangle_map: Arc::new(triangle_map(&before.traced, &after.traced, &instance_map)),
-        region: (lo, hi),
-        changed_old: Arc::new(changed_old),
-        changed_new: Arc::new(changed_new),
-    }
+    Edit::between(
+        &before.traced,
+        &after.traced,
+        &instance_map,
+        |k| changed.contains(&old_names[k]),
+        |k| changed.contains(&new_names[k]),
+    )
+    .expect("an edit that changes some triangles")
 }
 
 /// Re-bakes `before_bake` (of `before`) for `after`; the outcome and its seconds.

@@ -119,15 +119,6 @@ pub enum Prior {
     Filled(Vec3),
 }
 
-impl Prior {
-    /// The value before the edit.
-    pub fn value(self) -> Vec3 {
-        match self {
-            Prior::Estimated(v) | Prior::Filled(v) => v,
-        }
-    }
-}
-
 /// A sample a cache needs, with the key of its random stream.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SamplePoint {

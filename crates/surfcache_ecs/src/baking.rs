@@ -46,7 +46,6 @@ use crate::{
 };
 use bevy_ecs::prelude::*;
 use crossbeam_channel::{Receiver, TryRecvError, bounded};
-use glam::Vec3;
 use std::{
     collections::{BTreeSet, HashMap},
     sync::{
@@ -59,7 +58,6 @@ use surfcache_cache::{
     Cache, SurfaceCache,
     bake::{BakeJob, BakeOutcome, BakeSettings, JobProgress},
     incremental::{Edit, IncrementalJob},
-    triangle_map,
 };
 use surfcache_trace::TracedScene;
 
@@ -320,48 +318,6 @@ impl Baking {
     }
 }
 
-/// What changed between the old and the new scene: the changed instances' triangles in
-/// each, and the box around them all (`None` when no triangle changed).
-struct ChangedRegion {
-    region: Option<(Vec3, Vec3)>,
-    old_triangles: Vec<u32>,
-    new_triangles: Vec<u32>,
-}
-
-fn changed_region(
-    old: &TracedScene,
-    old_entities: &[Entity],
-    new: &TracedScene,
-    new_entities: &[Entity],
-    changed: &BTreeSet<Entity>,
-) -> ChangedRegion {
-    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    let mut triangles = [Vec::new(), Vec::new()];
-    for (side, (scene, entities)) in [(old, old_entities), (new, new_entities)]
-        .into_iter()
-        .enumerate()
-    {
-        for (k, e) in entities.iter().enumerate() {
-            if !changed.contains(e) {
-                continue;
-            }
-            for t in scene.instance_triangles()[k].clone() {
-                triangles[side].push(t);
-                for p in scene.positions()[t as usize] {
-                    lo = lo.min(p);
-                    hi = hi.max(p);
-                }
-            }
-        }
-    }
-    let [old_triangles, new_triangles] = triangles;
-    ChangedRegion {
-        region: (!old_triangles.is_empty() || !new_triangles.is_empty()).then_some((lo, hi)),
-        old_triangles,
-        new_triangles,
-    }
-}
-
 /// What a new traced scene needs.
 enum Plan {
     Bake(Job, bool),
@@ -386,21 +342,6 @@ fn plan(
     if baking.global || base.requested != config.settings {
         return full();
     }
-    let changes = changed_region(
-        &base.scene,
-        &base.entities,
-        scene,
-        entities,
-        &baking.changed,
-    );
-    let total = base.scene.triangle_count() + scene.triangle_count();
-    let Some(region) = changes.region else {
-        return Plan::Unchanged;
-    };
-    let changed_triangles = changes.old_triangles.len() + changes.new_triangles.len();
-    if changed_triangles as f32 > config.full_rebake_share * total as f32 {
-        return full();
-    }
     let index: HashMap<Entity, u32> = base
         .entities
         .iter()
@@ -408,17 +349,20 @@ fn plan(
         .map(|(k, e)| (*e, k as u32))
         .collect();
     let instance_map: Vec<Option<u32>> = entities.iter().map(|e| index.get(e).copied()).collect();
-    let map = Arc::new(triangle_map(&base.scene, scene, &instance_map));
-    let job = IncrementalJob::new(
-        base.outcome.clone(),
-        base.scene.clone(),
-        Edit {
-            triangle_map: map,
-            region,
-            changed_old: Arc::new(changes.old_triangles),
-            changed_new: Arc::new(changes.new_triangles),
-        },
-    );
+    let Some(edit) = Edit::between(
+        &base.scene,
+        scene,
+        &instance_map,
+        |k| baking.changed.contains(&base.entities[k]),
+        |k| baking.changed.contains(&entities[k]),
+    ) else {
+        return Plan::Unchanged;
+    };
+    let total = base.scene.triangle_count() + scene.triangle_count();
+    if edit.changed_triangles() as f32 > config.full_rebake_share * total as f32 {
+        return full();
+    }
+    let job = IncrementalJob::new(base.outcome.clone(), base.scene.clone(), edit);
     Plan::Bake(Job::Incremental(Box::new(job)), true)
 }
 

@@ -141,7 +141,6 @@ impl Previous {
         };
         let old_site = map_site(&self.scene, scene, &p.site, &self.triangle_map)?;
         let (new_point, new_origin) = sample_frame(scene, &p.site);
-        let (old_point, old_origin) = sample_frame(&self.scene, &old_site);
         let allowance =
             SKIP_SHARE * settings.max_rel_error * (prior.min_element().max(0.0) + settings.floor);
         if let Some(influence) = &self.influence
@@ -157,6 +156,8 @@ impl Previous {
         if !estimated {
             return None;
         }
+        // Only points the stage estimates need their frame before the edit.
+        let (old_point, old_origin) = sample_frame(&self.scene, &old_site);
         let new = PointInScene::new(scene, new_point, new_origin).with_gather(gather);
         let old = PointInScene::new(&self.scene, old_point, old_origin)
             .with_gather(self.gather.as_deref().map(|g| g as &dyn IrradianceLookup));

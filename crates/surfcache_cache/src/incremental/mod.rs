@@ -101,6 +101,51 @@ pub struct Edit {
     pub changed_new: Arc<Vec<u32>>,
 }
 
+impl Edit {
+    /// The edit that turns `old` into `new`: instance `i` of `new` is instance
+    /// `instance_map[i]` of `old` (`None`: new), and `changed_old(k)` / `changed_new(k)`
+    /// say which instances of each scene moved, appeared, disappeared or changed material.
+    /// `None` when those instances hold no triangle.
+    pub fn between(
+        old: &TracedScene,
+        new: &TracedScene,
+        instance_map: &[Option<u32>],
+        changed_old: impl Fn(usize) -> bool,
+        changed_new: impl Fn(usize) -> bool,
+    ) -> Option<Self> {
+        let triangles = |scene: &TracedScene, changed: &dyn Fn(usize) -> bool| -> Vec<u32> {
+            (0..scene.instance_triangles().len())
+                .filter(|&k| changed(k))
+                .flat_map(|k| scene.instance_triangles()[k].clone())
+                .collect()
+        };
+        let (changed_old, changed_new) =
+            (triangles(old, &changed_old), triangles(new, &changed_new));
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for (scene, list) in [(old, &changed_old), (new, &changed_new)] {
+            for &t in list {
+                for p in scene.positions()[t as usize] {
+                    (lo, hi) = (lo.min(p), hi.max(p));
+                }
+            }
+        }
+        if changed_old.is_empty() && changed_new.is_empty() {
+            return None;
+        }
+        Some(Self {
+            triangle_map: Arc::new(crate::triangle_map(old, new, instance_map)),
+            region: (lo, hi),
+            changed_old: Arc::new(changed_old),
+            changed_new: Arc::new(changed_new),
+        })
+    }
+
+    /// Changed triangles before and after the edit, counted together.
+    pub fn changed_triangles(&self) -> usize {
+        self.changed_old.len() + self.changed_new.len()
+    }
+}
+
 /// A cache of the scene before an edit, looked up on the edited scene's triangles
 /// (zero on triangles that did not exist before).
 pub struct MappedLookup {
@@ -128,8 +173,6 @@ pub struct IncrementalJob {
     stages: Vec<Arc<Cache>>,
     done: JobProgress,
     result: Option<Arc<Cache>>,
-    /// Rays traced to find each stage's [`Influence`].
-    influence_rays: u64,
 }
 
 impl IncrementalJob {
@@ -148,7 +191,6 @@ impl IncrementalJob {
                 ..Default::default()
             },
             result: None,
-            influence_rays: 0,
         }
     }
 
@@ -191,7 +233,6 @@ impl IncrementalJob {
                 self.sample_spacing(scene),
                 settings.seed,
             );
-            self.influence_rays += influence.rays();
             Baker::new(cache, settings.estimator, settings.seed)
                 .with_gather(self.old_lookup())
                 .with_previous(Previous {
@@ -249,7 +290,6 @@ impl IncrementalJob {
                 self.sample_spacing(scene),
                 settings.seed ^ k as u64,
             );
-            self.influence_rays += influence.rays();
             Baker::new(
                 cache,
                 estimator,
