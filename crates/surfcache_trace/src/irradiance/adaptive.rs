@@ -76,52 +76,23 @@ pub(super) fn sample_adaptively(
     unseen: f64,
     mut draw: impl FnMut([f32; 5], &mut Rng) -> (Vec3, FirstHit, u32),
 ) -> Estimate {
-    let sampler = settings.sampler;
     let mut rng = Rng::new(seed, key);
     let floor = settings.floor as f64;
     let max = settings.max_samples.max(1);
     let min = min.clamp(1, max);
-    let (mut back, mut rays, mut lit) = (0u32, 0u64, 0u32);
-    // Pseudo-random: one accumulator. Quasi-random: one per replicate.
-    let mut single = Accumulator::default();
-    let mut replicates = [Accumulator::default(); QMC_REPLICATES as usize];
-    // One Owen scrambling per replicate, keyed by (seed, key, replicate).
-    let point = splitmix64(seed ^ splitmix64(key ^ 0x5bd1_e995_0000_0000));
-    let streams: [u32; QMC_REPLICATES as usize] =
-        core::array::from_fn(|r| splitmix64(point ^ r as u64) as u32);
-    let mut n = 0u32;
+    let streams = replicate_streams(seed, key);
+    let mut tally = Tally::new(settings.sampler.quasi_random());
     let (mean, std_error) = loop {
-        let round_end = (n + QMC_REPLICATES).min(max);
-        while n < round_end {
-            let root = if sampler.quasi_random() {
-                let stream = streams[(n % QMC_REPLICATES) as usize];
-                let index = n / QMC_REPLICATES;
-                let [a, b, c, d] = sobol_4d(index, 0, stream);
-                let [e, ..] = sobol_4d(index, 1, stream);
-                [a, b, c, d, e]
-            } else {
-                let mut r = [0.0; 5];
-                r.iter_mut().for_each(|v| *v = rng.next_f32());
-                r
-            };
+        let round_end = (tally.n + QMC_REPLICATES).min(max);
+        while tally.n < round_end {
+            let root = root_dimensions(tally.quasi, tally.n, &streams, &mut rng);
             let (x, first_hit, path_rays) = draw(root, &mut rng);
-            back += (first_hit == FirstHit::Back) as u32;
-            lit += (x != Vec3::ZERO) as u32;
-            rays += path_rays as u64;
-            if sampler.quasi_random() {
-                replicates[(n % QMC_REPLICATES) as usize].add(x);
-            } else {
-                single.add(x);
-            }
-            n += 1;
+            tally.add(x, first_hit, path_rays);
         }
-        let (mean, se) = if sampler.quasi_random() {
-            replicate_statistics(&replicates)
-        } else {
-            (single.mean(), single.std_error())
-        };
+        let (n, back) = (tally.n, tally.back);
+        let (mean, se) = tally.statistics();
         let total = (mean + offset.as_dvec3()).abs();
-        let zero_run = zero_run_error(n, lit, back, unseen, total, floor);
+        let zero_run = zero_run_error(n, tally.lit, back, unseen, total, floor);
         let c = relative_error(total, se, floor).max(zero_run.1);
         // Every first ray so far met the back of a single-sided surface: the point lies
         // inside a solid, and the caches discard it whatever more samples would say.
@@ -130,21 +101,124 @@ pub(super) fn sample_adaptively(
             break (mean, se.max(DVec3::splat(zero_run.0)));
         }
     };
-    let value = (mean + offset.as_dvec3()).as_vec3();
-    let std_error = if n < 2 {
-        Vec3::ZERO
+    tally.estimate(mean, std_error, offset, unseen, floor)
+}
+
+/// One Owen scrambling per QMC replicate, keyed by (seed, key, replicate).
+fn replicate_streams(seed: u64, key: u64) -> [u32; QMC_REPLICATES as usize] {
+    let point = splitmix64(seed ^ splitmix64(key ^ 0x5bd1_e995_0000_0000));
+    core::array::from_fn(|r| splitmix64(point ^ r as u64) as u32)
+}
+
+/// The root dimensions of sample `n`: quasi-random, the `n / R`-th scrambled Sobol'
+/// point of replicate `n mod R`'s stream; pseudo-random, the next five numbers of `rng`.
+#[inline]
+fn root_dimensions(
+    quasi: bool,
+    n: u32,
+    streams: &[u32; QMC_REPLICATES as usize],
+    rng: &mut Rng,
+) -> [f32; 5] {
+    if quasi {
+        let stream = streams[(n % QMC_REPLICATES) as usize];
+        let index = n / QMC_REPLICATES;
+        let [a, b, c, d] = sobol_4d(index, 0, stream);
+        let [e, ..] = sobol_4d(index, 1, stream);
+        [a, b, c, d, e]
     } else {
-        std_error.as_vec3()
-    };
-    let zero_run = zero_run_error(n, lit, back, unseen, value.as_dvec3().abs(), floor).1;
-    Estimate {
-        value,
-        std_error,
-        samples: n,
-        rel_error: relative_error(value.as_dvec3().abs(), std_error.as_dvec3(), floor).max(zero_run)
-            as f32,
-        back_face_share: back as f32 / n as f32,
-        rays,
+        let mut r = [0.0; 5];
+        r.iter_mut().for_each(|v| *v = rng.next_f32());
+        r
+    }
+}
+
+/// The running sums of [`sample_adaptively`]: the samples drawn, their sums
+/// (pseudo-random: one accumulator; quasi-random: one per replicate), and how many were
+/// non-zero, met a back face first, and the rays they traced.
+struct Tally {
+    quasi: bool,
+    n: u32,
+    single: Accumulator,
+    replicates: [Accumulator; QMC_REPLICATES as usize],
+    lit: u32,
+    back: u32,
+    rays: u64,
+}
+
+impl Tally {
+    /// No samples yet, for a quasi-random (`quasi`) or pseudo-random sampler.
+    fn new(quasi: bool) -> Self {
+        Self {
+            quasi,
+            n: 0,
+            single: Accumulator::default(),
+            replicates: [Accumulator::default(); QMC_REPLICATES as usize],
+            lit: 0,
+            back: 0,
+            rays: 0,
+        }
+    }
+
+    /// Adds sample X_n, whose path met `first_hit` first and traced `path_rays` rays.
+    #[inline]
+    fn add(&mut self, x: Vec3, first_hit: FirstHit, path_rays: u32) {
+        self.back += (first_hit == FirstHit::Back) as u32;
+        self.lit += (x != Vec3::ZERO) as u32;
+        self.rays += path_rays as u64;
+        if self.quasi {
+            self.replicates[(self.n % QMC_REPLICATES) as usize].add(x);
+        } else {
+            self.single.add(x);
+        }
+        self.n += 1;
+    }
+
+    /// Mean and standard error of the samples so far: from the replicates
+    /// ([`replicate_statistics`]) or from the single accumulator.
+    fn statistics(&self) -> (DVec3, DVec3) {
+        if self.quasi {
+            replicate_statistics(&self.replicates)
+        } else {
+            (self.single.mean(), self.single.std_error())
+        }
+    }
+
+    /// The estimate once sampling stopped at `mean` and `std_error`: the value
+    /// offset + mean, and C = se / (|value| + ε), at least the all-zero run's
+    /// ([`zero_run_error`]).
+    fn estimate(
+        &self,
+        mean: DVec3,
+        std_error: DVec3,
+        offset: Vec3,
+        unseen: f64,
+        floor: f64,
+    ) -> Estimate {
+        let n = self.n;
+        let value = (mean + offset.as_dvec3()).as_vec3();
+        let std_error = if n < 2 {
+            Vec3::ZERO
+        } else {
+            std_error.as_vec3()
+        };
+        let zero_run = zero_run_error(
+            n,
+            self.lit,
+            self.back,
+            unseen,
+            value.as_dvec3().abs(),
+            floor,
+        )
+        .1;
+        Estimate {
+            value,
+            std_error,
+            samples: n,
+            rel_error: relative_error(value.as_dvec3().abs(), std_error.as_dvec3(), floor)
+                .max(zero_run) as f32,
+            back_face_share: self.back as f32 / n as f32,
+            rays: self.rays,
+        }
     }
 }
 

@@ -60,29 +60,70 @@ pub fn estimate_change(
         return unchanged(prior, settings);
     }
     let mut punctual_rays = 0;
-    // Within one scene (the indirect stages of a re-bake) the punctual parts cancel.
-    let (punctual_new, punctual_old) = if std::ptr::eq(old.scene, new.scene) {
-        (Vec3::ZERO, Vec3::ZERO)
-    } else {
-        (
-            new.scene
-                .punctual_irradiance_from(&new.point, new.origin, &mut punctual_rays),
-            old.scene
-                .punctual_irradiance_from(&old.point, old.origin, &mut punctual_rays),
-        )
+    let (punctual_new, punctual_old) = punctual_parts(old, new, &mut punctual_rays);
+    let change = Change {
+        old,
+        new,
+        settings,
+        seed,
+        key,
+        focus,
+        offset: prior + punctual_new - punctual_old,
+        bound: settings.max_rel_error * CHANGE_ERROR_SHARE,
     };
-    let bound = settings.max_rel_error * CHANGE_ERROR_SHARE;
-    let change = |max_samples: u32| {
+    let (mut e, fresh) = change.probe_then_estimate();
+    if !fresh {
+        change.settle(&mut e);
+    }
+    e.rays += punctual_rays as u64;
+    e
+}
+
+/// The punctual lights' exact parts (E_new, E_old) at the point of [`estimate_change`],
+/// their shadow rays added to `rays`; both zero within one scene (the indirect stages of
+/// a re-bake), where they cancel.
+fn punctual_parts(old: &PointInScene, new: &PointInScene, rays: &mut u32) -> (Vec3, Vec3) {
+    if std::ptr::eq(old.scene, new.scene) {
+        return (Vec3::ZERO, Vec3::ZERO);
+    }
+    (
+        new.scene
+            .punctual_irradiance_from(&new.point, new.origin, rays),
+        old.scene
+            .punctual_irradiance_from(&old.point, old.origin, rays),
+    )
+}
+
+/// One point's change as [`estimate_change`] samples it: the point in both scenes, the
+/// settings and random stream, the value of a zero change, and the change's error bound.
+struct Change<'a> {
+    old: &'a PointInScene<'a>,
+    new: &'a PointInScene<'a>,
+    settings: &'a EstimatorSettings,
+    seed: u64,
+    key: u64,
+    focus: Option<&'a Cone>,
+    /// prior + E_new − E_old of the punctual lights: the value if the sampled change is zero.
+    offset: Vec3,
+    /// [`CHANGE_ERROR_SHARE`] × `max_rel_error`.
+    bound: f32,
+}
+
+impl Change<'_> {
+    /// offset + E[X_new − X_old] by correlated sampling, with at most `max_samples` pairs:
+    /// each pair traces the same root dimensions and random numbers in both scenes.
+    fn sample(&self, max_samples: u32) -> Estimate {
         let settings = EstimatorSettings {
             max_samples,
-            ..*settings
+            ..*self.settings
         };
+        let (old, new, focus) = (self.old, self.new, self.focus);
         sample_adaptively(
             &settings,
-            seed,
-            key,
-            prior + punctual_new - punctual_old,
-            bound,
+            self.seed,
+            self.key,
+            self.offset,
+            self.bound,
             CHANGE_MIN_SAMPLES,
             0.0,
             |root, rng| {
@@ -96,40 +137,54 @@ pub fn estimate_change(
                 )
             },
         )
-    };
-    // A probe tells whether the change is cheaper to estimate than E itself: where the
-    // edit changes a large part of a dark point's light (a shadow moved onto it), the
-    // change has the variance of the old, bright E but must reach the precision of the
-    // new, dim one; a fresh estimate of E is then cheaper.
-    let probe_samples = CHANGE_PROBE_SAMPLES.min(settings.max_samples);
-    let probe = change(probe_samples);
-    let (mut e, fresh) = if probe.samples < probe_samples || probe.rel_error <= bound {
-        (probe, false)
-    } else {
-        let projected = probe.samples as f32 * (probe.rel_error / bound).powi(2);
+    }
+
+    /// The estimate after a probe of [`CHANGE_PROBE_SAMPLES`] pairs: the probe itself if
+    /// it met the bound (or drew every pair allowed), else the change sampled up to
+    /// `max_samples`, or E afresh ([`estimate`]) when the probe projects more than
+    /// [`CHANGE_FALLBACK_FACTOR`] × `min_samples` pairs ([`projected_pairs`]); and whether
+    /// it is E afresh. The probe's rays are counted in.
+    fn probe_then_estimate(&self) -> (Estimate, bool) {
+        let settings = self.settings;
+        // A probe tells whether the change is cheaper to estimate than E itself: where the
+        // edit changes a large part of a dark point's light (a shadow moved onto it), the
+        // change has the variance of the old, bright E but must reach the precision of the
+        // new, dim one; a fresh estimate of E is then cheaper.
+        let probe_samples = CHANGE_PROBE_SAMPLES.min(settings.max_samples);
+        let probe = self.sample(probe_samples);
+        if probe.samples < probe_samples || probe.rel_error <= self.bound {
+            return (probe, false);
+        }
+        let projected = projected_pairs(&probe, self.bound);
         let (mut e, fresh) = if projected > CHANGE_FALLBACK_FACTOR * settings.min_samples as f32 {
-            let e = estimate(new, settings, seed, key);
-            (e, true)
+            (estimate(self.new, settings, self.seed, self.key), true)
         } else {
-            (change(settings.max_samples), false)
+            (self.sample(settings.max_samples), false)
         };
         e.rays += probe.rays;
         (e, fresh)
-    };
-    if !fresh {
+    }
+
+    /// The sampled change's final value and error: zero (the value is `offset`) when it
+    /// lies within one standard error of zero in every channel, and the prior's error
+    /// added ([`with_prior_error`]).
+    fn settle(&self, e: &mut Estimate) {
         // A sampled change within one standard error of zero in every channel is noise
         // as far as this estimate can tell: keep the prior (plus the exact punctual
         // change). The value then differs from the unbiased one by at most that standard
         // error, within the change's error share, and re-bakes do not spread the noise
         // of far points, which an edit barely touches, through their indirect stages.
-        let offset = prior + punctual_new - punctual_old;
-        if (e.value - offset).abs().cmple(e.std_error).all() {
-            e.value = offset;
+        if (e.value - self.offset).abs().cmple(e.std_error).all() {
+            e.value = self.offset;
         }
-        e.std_error = with_prior_error(e.value, e.std_error, settings);
+        e.std_error = with_prior_error(e.value, e.std_error, self.settings);
     }
-    e.rays += punctual_rays as u64;
-    e
+}
+
+/// The pairs a change would need to meet `bound` at the rate of `probe`, since C falls
+/// as 1/√n: n_probe × (C_probe / bound)².
+fn projected_pairs(probe: &Estimate, bound: f32) -> f32 {
+    probe.samples as f32 * (probe.rel_error / bound).powi(2)
 }
 
 /// The estimate of a point whose change is known to be zero (or is left out): its

@@ -1,7 +1,7 @@
 //! The two log-log charts of `surfcache chart`: relative RMS error against bake seconds
 //! and against cache bytes, one panel per scene, one curve per (method, sampler).
 
-use super::{Row, panel_measure};
+use super::{ErrorMeasure, Row, panel_measure};
 use anyhow::{Context, Result, anyhow};
 use plotters::{
     prelude::*,
@@ -117,15 +117,47 @@ pub fn draw(path: &Path, rows: &[Row], axis: XAxis) -> Result<()> {
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
 
-fn draw_panel(
-    area: &Area<'_>,
-    rows: &[Row],
+/// A panel's chart: log-log axes on the bitmap.
+type LogChart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>;
+
+/// A point of a panel: its row, and its x (seconds or bytes) and y (the error measure).
+type Point<'a> = (&'a Row, f64, f64);
+
+/// Errors of drawing a panel.
+type DrawResult<T> = std::result::Result<T, Box<dyn std::error::Error>>;
+
+/// Draws `scene`'s panel into `area`: a curve with markers per (method, sampler) and a
+/// legend, or a note when the scene has no point to plot.
+fn draw_panel(area: &Area<'_>, rows: &[Row], scene: &str, axis: XAxis) -> DrawResult<()> {
+    let measure = panel_measure(scene);
+    let measured = panel_points(rows, scene, axis, measure);
+    if measured.is_empty() {
+        return draw_no_bakes(area, scene);
+    }
+    let mut chart = draw_axes(area, &measured, scene, axis, measure)?;
+    for (method, sampler) in curves(&measured) {
+        draw_curve(&mut chart, &measured, method, sampler)?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.4))
+        .label_font(("sans-serif", 15))
+        .draw()?;
+    Ok(())
+}
+
+/// `scene`'s measured rows as points on `axis` and `measure`, those with both
+/// coordinates positive and finite (a log axis can show no other).
+fn panel_points<'a>(
+    rows: &'a [Row],
     scene: &str,
     axis: XAxis,
-) -> std::result::Result<(), Box<dyn std::error::Error>> {
-    let measure = panel_measure(scene);
-    let measured: Vec<(&Row, f64, f64)> = rows
-        .iter()
+    measure: ErrorMeasure,
+) -> Vec<Point<'a>> {
+    rows.iter()
         .filter(|r| r.scene == scene)
         .filter_map(|r| {
             let m = r.measured?;
@@ -136,23 +168,36 @@ fn draw_panel(
             let y = measure.of(&m);
             (x > 0.0 && y > 0.0 && x.is_finite() && y.is_finite()).then_some((r, x, y))
         })
-        .collect();
-    if measured.is_empty() {
-        let (w, h) = area.dim_in_pixel();
-        let style = ("sans-serif", 24).into_font().color(&BLACK);
-        area.draw_text(
-            &format!("{scene}: no bake finished within its cap"),
-            &style,
-            (40, h as i32 / 2 - 20),
-        )?;
-        area.draw_text(
-            "(see speed_accuracy.md)",
-            &("sans-serif", 18).into_font().color(&BLACK),
-            (40, h as i32 / 2 + 16),
-        )?;
-        let _ = w;
-        return Ok(());
-    }
+        .collect()
+}
+
+/// The panel of a scene with no point to plot (no bake finished, or none kept the panel's
+/// measure): a note pointing to the summary.
+fn draw_no_bakes(area: &Area<'_>, scene: &str) -> DrawResult<()> {
+    let (_, h) = area.dim_in_pixel();
+    let style = ("sans-serif", 24).into_font().color(&BLACK);
+    area.draw_text(
+        &format!("{scene}: no bake finished within its cap"),
+        &style,
+        (40, h as i32 / 2 - 20),
+    )?;
+    area.draw_text(
+        "(see speed_accuracy.md)",
+        &("sans-serif", 18).into_font().color(&BLACK),
+        (40, h as i32 / 2 + 16),
+    )?;
+    Ok(())
+}
+
+/// The panel's caption and its log-log axes with grid and labels, spanning whole decades
+/// around `measured` ([`range`]).
+fn draw_axes<'a, 'b>(
+    area: &'a Area<'b>,
+    measured: &[Point],
+    scene: &str,
+    axis: XAxis,
+    measure: ErrorMeasure,
+) -> DrawResult<LogChart<'a, 'b>> {
     let xr = range(measured.iter().map(|m| m.1));
     let yr = range(measured.iter().map(|m| m.2));
     let (caption, x_desc) = match axis {
@@ -182,44 +227,51 @@ fn draw_panel(
         .x_label_formatter(&|v| format_number(*v))
         .y_label_formatter(&|v| format!("{}%", format_number(v * 100.0)))
         .draw()?;
+    Ok(chart)
+}
+
+/// The (method, sampler) pairs of `measured`, in order of first appearance.
+fn curves<'a>(measured: &[Point<'a>]) -> Vec<(&'a str, &'a str)> {
     let mut curves: Vec<(&str, &str)> = Vec::new();
-    for (r, _, _) in &measured {
+    for (r, _, _) in measured {
         if !curves.contains(&(r.method.as_str(), r.sampler.as_str())) {
             curves.push((&r.method, &r.sampler));
         }
     }
-    for (method, sampler) in curves {
-        let mut points: Vec<(f32, f64, f64)> = measured
-            .iter()
-            .filter(|(r, _, _)| r.method == method && r.sampler == sampler)
-            .map(|(r, x, y)| (r.bound, *x, *y))
-            .collect();
-        points.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let colour = sampler_colour(method_colour(method), sampler);
-        let width = if sampler == "best" { 3 } else { 2 };
-        let line = colour.stroke_width(width);
-        let sampler_name = sampler.to_string();
-        chart
-            .draw_series(LineSeries::new(points.iter().map(|p| (p.1, p.2)), line))?
-            .label(format!("{method} / {sampler}"))
-            .legend(move |(x, y)| {
-                EmptyElement::at((x, y))
-                    + PathElement::new(vec![(-8, 0), (12, 0)], colour.stroke_width(width))
-                    + marker(&sampler_name, colour, 2, 4)
-            });
-        chart.draw_series(
-            points
-                .iter()
-                .map(|p| EmptyElement::at((p.1, p.2)) + marker(sampler, colour, 0, 5)),
-        )?;
-    }
+    curves
+}
+
+/// The curve of (`method`, `sampler`) through its points, loosest bound first, with a
+/// marker at each point and a legend entry.
+fn draw_curve<'a, 'b: 'a>(
+    chart: &mut LogChart<'a, 'b>,
+    measured: &[Point],
+    method: &str,
+    sampler: &str,
+) -> DrawResult<()> {
+    let mut points: Vec<(f32, f64, f64)> = measured
+        .iter()
+        .filter(|(r, _, _)| r.method == method && r.sampler == sampler)
+        .map(|(r, x, y)| (r.bound, *x, *y))
+        .collect();
+    points.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let colour = sampler_colour(method_colour(method), sampler);
+    let width = if sampler == "best" { 3 } else { 2 };
+    let line = colour.stroke_width(width);
+    let sampler_name = sampler.to_string();
     chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.4))
-        .label_font(("sans-serif", 15))
-        .draw()?;
+        .draw_series(LineSeries::new(points.iter().map(|p| (p.1, p.2)), line))?
+        .label(format!("{method} / {sampler}"))
+        .legend(move |(x, y)| {
+            EmptyElement::at((x, y))
+                + PathElement::new(vec![(-8, 0), (12, 0)], colour.stroke_width(width))
+                + marker(&sampler_name, colour, 2, 4)
+        });
+    chart.draw_series(
+        points
+            .iter()
+            .map(|p| EmptyElement::at((p.1, p.2)) + marker(sampler, colour, 0, 5)),
+    )?;
     Ok(())
 }
 

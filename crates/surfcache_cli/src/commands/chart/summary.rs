@@ -108,46 +108,76 @@ pub fn summary(rows: &[Row], settings: &str) -> String {
     let scenes = unique(rows, |r| &r.scene);
     let methods = unique(rows, |r| &r.method);
     let samplers = unique(rows, |r| &r.sampler);
+    write_bound_table(&mut md, rows, &scenes, &methods, &samplers);
+    write_time_ratios(&mut md, rows, &scenes, &methods);
+    write_bytes_at_error(&mut md, rows, &scenes, &methods, &samplers);
+    write_skipped(&mut md, rows);
+    md
+}
 
+/// The summary's table of each curve's row at the 1 % bound, or the tightest one reached
+/// ([`nearest_one_percent`]).
+fn write_bound_table(
+    md: &mut String,
+    rows: &[Row],
+    scenes: &[&str],
+    methods: &[&str],
+    samplers: &[&str],
+) {
     md.push_str("## At the 1 % bound (or the tightest bound reached)\n\n");
     md.push_str("| scene | method | sampler | bound | seconds | rel_rms | median | p90 | bytes | sample points |\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
-    for scene in &scenes {
-        for method in &methods {
-            for sampler in &samplers {
-                let best = rows
-                    .iter()
-                    .filter(|r| r.scene == *scene && r.method == *method && r.sampler == *sampler)
-                    .filter(|r| r.measured.is_some())
-                    .min_by(|a, b| {
-                        let ka = (a.bound - 0.01).abs() + if a.bound < 0.01 { 1.0 } else { 0.0 };
-                        let kb = (b.bound - 0.01).abs() + if b.bound < 0.01 { 1.0 } else { 0.0 };
-                        ka.total_cmp(&kb)
-                    });
-                if let Some(r) = best {
-                    let m = r.measured.expect("filtered");
-                    let _ = writeln!(
-                        md,
-                        "| {scene} | {method} | {sampler} | {} | {:.1} | {} | {} | {} | {} | {} |",
-                        r.bound,
-                        r.seconds,
-                        pct(m.rel_rms),
-                        pct_or_dash(m.median_rel),
-                        pct_or_dash(m.p90_rel),
-                        m.bytes,
-                        m.sample_points
-                    );
-                }
+    for scene in scenes {
+        for method in methods {
+            for sampler in samplers {
+                let Some(r) = nearest_one_percent(rows, scene, method, sampler) else {
+                    continue;
+                };
+                let m = r.measured.expect("filtered");
+                let _ = writeln!(
+                    md,
+                    "| {scene} | {method} | {sampler} | {} | {:.1} | {} | {} | {} | {} | {} |",
+                    r.bound,
+                    r.seconds,
+                    pct(m.rel_rms),
+                    pct_or_dash(m.median_rel),
+                    pct_or_dash(m.p90_rel),
+                    m.bytes,
+                    m.sample_points
+                );
             }
         }
     }
+}
 
+/// The measured row of a curve whose bound is nearest 1 %, a looser bound before any
+/// tighter one (|bound − 1 %|, plus 1 below 1 %); the first such row on a tie.
+fn nearest_one_percent<'a>(
+    rows: &'a [Row],
+    scene: &str,
+    method: &str,
+    sampler: &str,
+) -> Option<&'a Row> {
+    rows.iter()
+        .filter(|r| r.scene == scene && r.method == method && r.sampler == sampler)
+        .filter(|r| r.measured.is_some())
+        .min_by(|a, b| {
+            let ka = (a.bound - 0.01).abs() + if a.bound < 0.01 { 1.0 } else { 0.0 };
+            let kb = (b.bound - 0.01).abs() + if b.bound < 0.01 { 1.0 } else { 0.0 };
+            ka.total_cmp(&kb)
+        })
+}
+
+/// The summary's table of the seconds `uniform` and `best` need for equal error
+/// ([`at_error`]), per scene and method: at the [`LEVELS`] above the lowest error both
+/// curves reach, and at that error.
+fn write_time_ratios(md: &mut String, rows: &[Row], scenes: &[&str], methods: &[&str]) {
     md.push_str("\n## Time of `uniform` against `best` at equal error\n\n");
     md.push_str("Read along each curve (log-log interpolation between measured bounds; `≤`: already the loosest bound was that accurate, so the time is at most the loosest bake's), at fixed error levels both curves reach and at the lowest error both reach.\n\n");
     md.push_str(
         "| scene | method | error | uniform | best | ratio |\n|---|---|---:|---:|---:|---:|\n",
     );
-    for scene in &scenes {
-        for method in &methods {
+    for scene in scenes {
+        for method in methods {
             let u = curve(rows, scene, method, "uniform");
             let b = curve(rows, scene, method, "best");
             let (Some(eu), Some(eb)) = (lowest_error(&u), lowest_error(&b)) else {
@@ -160,36 +190,52 @@ pub fn summary(rows: &[Row], settings: &str) -> String {
                 let (Some(tu), Some(tb)) = (at_error(&u, e, 1), at_error(&b, e, 1)) else {
                     continue;
                 };
-                let ratio = match (tu, tb) {
-                    (Read::Exact(u), Read::Exact(b)) => format!("{:.1}×", u / b),
-                    (Read::Exact(u), Read::AtMost(b)) => format!("≥ {:.1}×", u / b),
-                    (Read::AtMost(u), Read::Exact(b)) => format!("≤ {:.1}×", u / b),
-                    (Read::AtMost(u), Read::AtMost(b)) => format!("~{:.1}× (both ≤)", u / b),
-                };
                 let _ = writeln!(
                     md,
-                    "| {scene} | {method} | {} | {} | {} | {ratio} |",
+                    "| {scene} | {method} | {} | {} | {} | {} |",
                     pct(e),
                     read_str(tu, " s"),
-                    read_str(tb, " s")
+                    read_str(tb, " s"),
+                    time_ratio(tu, tb)
                 );
             }
         }
     }
+}
 
+/// The ratio t_uniform / t_best, marked by how each time was read: ≥, ≤, or ~ when both
+/// are upper bounds.
+fn time_ratio(tu: Read, tb: Read) -> String {
+    match (tu, tb) {
+        (Read::Exact(u), Read::Exact(b)) => format!("{:.1}×", u / b),
+        (Read::Exact(u), Read::AtMost(b)) => format!("≥ {:.1}×", u / b),
+        (Read::AtMost(u), Read::Exact(b)) => format!("≤ {:.1}×", u / b),
+        (Read::AtMost(u), Read::AtMost(b)) => format!("~{:.1}× (both ≤)", u / b),
+    }
+}
+
+/// The summary's table of the cache bytes each method needs at each of the [`LEVELS`],
+/// per scene and sampler ([`at_error`]); levels no method reaches are left out.
+fn write_bytes_at_error(
+    md: &mut String,
+    rows: &[Row],
+    scenes: &[&str],
+    methods: &[&str],
+    samplers: &[&str],
+) {
     md.push_str("\n## Bytes per method at equal error\n\n");
     md.push_str("Cache bytes each method needs for a given error (the measure its scene's chart plots), read along its curve as above (–: never that accurate in this sweep).\n\n");
     md.push_str("| scene | sampler | error |");
-    for m in &methods {
+    for m in methods {
         let _ = write!(md, " {m} |");
     }
     md.push_str("\n|---|---|---:|");
-    for _ in &methods {
+    for _ in methods {
         md.push_str("---:|");
     }
     md.push('\n');
-    for scene in &scenes {
-        for sampler in &samplers {
+    for scene in scenes {
+        for sampler in samplers {
             let curves: Vec<_> = methods
                 .iter()
                 .map(|m| curve(rows, scene, m, sampler))
@@ -210,7 +256,10 @@ pub fn summary(rows: &[Row], settings: &str) -> String {
             }
         }
     }
+}
 
+/// The summary's list of the rows skipped or capped (no measurement), with their notes.
+fn write_skipped(md: &mut String, rows: &[Row]) {
     let skipped: Vec<&Row> = rows.iter().filter(|r| r.measured.is_none()).collect();
     md.push_str("\n## Skipped or capped\n\n");
     if skipped.is_empty() {
@@ -225,7 +274,6 @@ pub fn summary(rows: &[Row], settings: &str) -> String {
             );
         }
     }
-    md
 }
 
 #[cfg(test)]
