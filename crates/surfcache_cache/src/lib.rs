@@ -401,6 +401,14 @@ impl Cache {
         }
     }
 
+    /// Takes what `other`, a finished pass over the same layout and scene, found once
+    /// for every pass (a lightmap's crossing probes), instead of finding it again.
+    pub fn adopt_probes(&mut self, other: &Cache) {
+        if let (Self::Lightmap(a), Self::Lightmap(b)) = (self, other) {
+            a.adopt_probes(b);
+        }
+    }
+
     fn inner(&self) -> &dyn SurfaceCache {
         match self {
             Self::Vertex(c) => c,

@@ -5,9 +5,10 @@
 mod common;
 
 use common::{PI, square_projected_solid_angle};
-use surfcache_cache::incremental::Influence;
+use surfcache_cache::incremental::{ChangePatch, Influence, Side};
 use surfcache_core::{
     Environment, Instance, Material, Scene,
+    geometry::plane_barycentric,
     glam::{Affine3A, Vec2, Vec3},
     scenes::{cuboid, square},
 };
@@ -69,6 +70,88 @@ fn forward_rays_estimate_the_change_a_new_surface_makes() {
     assert!(!influence.reaches(0, Vec3::new(9.0, 0.0, 9.0), Vec3::Y, 0.01));
     // The other side of the floor sees nothing of it.
     assert_eq!(influence.change_at(Vec3::ZERO, -Vec3::Y).0, 0.0);
+}
+
+/// Irradiance `after` on some triangles' front sides, zero elsewhere and before.
+struct OnTriangles {
+    triangles: Vec<u32>,
+    after: f32,
+}
+
+impl IrradianceLookup for OnTriangles {
+    fn irradiance(&self, triangle: u32, _uv: Vec2, front: bool) -> Option<Vec3> {
+        let on = front && self.triangles.contains(&triangle);
+        Some(Vec3::splat(if on { self.after } else { 0.0 }))
+    }
+}
+
+/// The square of the test above, grey and lit afresh on its lower side (ΔE = 1 there),
+/// as an indirect stage sees it: 8 × 8 texels as sources. The floor below gets
+/// `ρ/π · ΔE` over the square's projected solid angle.
+#[test]
+fn forward_rays_from_changed_texels_estimate_the_change_they_pass_on() {
+    let albedo = 0.5;
+    let grey = Material::diffuse("grey", Vec3::splat(albedo));
+    let scene = traced(
+        vec![
+            Instance::new(square("floor", 10.0, 0.0, Vec3::Y), grey.clone()),
+            Instance::new(square("patch", 0.25, 2.0, -Vec3::Y), grey),
+        ],
+        Environment::uniform(Vec3::ZERO),
+    );
+    let square_triangles = [2u32, 3];
+    let texels = 8;
+    let size = 0.5 / texels as f32;
+    let mut patches = Vec::new();
+    for i in 0..texels {
+        for j in 0..texels {
+            let p = Vec3::new(
+                -0.25 + (i as f32 + 0.5) * size,
+                2.0,
+                -0.25 + (j as f32 + 0.5) * size,
+            );
+            // The triangle of the square that holds the texel centre.
+            let (triangle, uv) = square_triangles
+                .iter()
+                .map(|&t| {
+                    let [a, b, c] = scene.positions()[t as usize];
+                    (t, plane_barycentric(p, a, b, c))
+                })
+                .find(|(_, uv)| uv.min_element() >= 0.0 && uv.x + uv.y <= 1.0)
+                .unwrap();
+            patches.push(ChangePatch {
+                triangle,
+                side: Side::Front,
+                uv: Some(uv),
+                area: size * size,
+                change: 1.0,
+            });
+        }
+    }
+    let after = OnTriangles {
+        triangles: square_triangles.to_vec(),
+        after: 1.0,
+    };
+    let before = OnTriangles {
+        triangles: Vec::new(),
+        after: 0.0,
+    };
+    let influence = Influence::of_changes(&scene, &after, &before, &patches, 0.0, 0.05, 11);
+    for x in [0.0, 0.7, 1.5] {
+        let p = Vec3::new(x, 0.0, 0.3);
+        let exact = albedo / PI * square_projected_solid_angle(p);
+        let (q, sigma) = influence.change_at(p, Vec3::Y);
+        assert!(
+            (q - exact).abs() <= 4.0 * sigma + 0.05 * exact,
+            "at x = {x}: Q = {q} ± {sigma}, exact {exact}"
+        );
+        assert!(sigma < exact / 3.0, "at x = {x}: σ = {sigma} of {exact}");
+    }
+    // The square's upper side did not change: nothing above it is reached.
+    assert_eq!(
+        influence.change_at(Vec3::new(0.0, 3.0, 0.0), -Vec3::Y).0,
+        0.0
+    );
 }
 
 /// Two sealed rooms side by side, each lit (its cache holds E = 1 everywhere), and a

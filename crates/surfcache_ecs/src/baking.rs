@@ -17,9 +17,11 @@
 //! change through the directions towards the box around the changed instances' old and
 //! new surfaces (exactly zero, without tracing, where that box lies below a sample's
 //! horizon), then three stages of indirect change from surfaces whose irradiance changed
-//! in the stage before. Each indirect stage bounds its change at every point from all
-//! stored samples (`surfcache_cache::incremental::ChangeBound`) and skips the points
-//! where the bound is below a quarter of their error bound. Left out, as its docs bound:
+//! in the stage before. Each stage first traces its sources forward
+//! (`surfcache_cache::incremental::Influence`) and keeps the value of every point where
+//! the change they estimate stays below a quarter of its error bound; each indirect stage
+//! also bounds its change from all stored samples
+//! (`surfcache_cache::incremental::ChangeBound`). Left out, as its docs bound:
 //! changes that reach a sample over more than four bounces off the edited region, and
 //! what the skipped points' bounds allow.
 //!

@@ -121,6 +121,10 @@ pub struct Previous {
     /// Where the stage's change can reach: points it does not reach keep their value
     /// without a ray ([`Influence::reaches`]).
     pub influence: Option<Arc<Influence>>,
+    /// Whether the surfaces differ from `scene`'s (the direct stage of a re-bake). Where
+    /// they do not, a point found buried before stays buried: its filled prior is kept
+    /// and filled again from its neighbours, never estimated.
+    pub geometry_changed: bool,
 }
 
 impl Previous {
@@ -139,6 +143,9 @@ impl Previous {
             Prior::Estimated(v) => (v, true),
             Prior::Filled(v) => (v, false),
         };
+        if !estimated && !self.geometry_changed {
+            return Some(unchanged(prior, settings));
+        }
         let old_site = map_site(&self.scene, scene, &p.site, &self.triangle_map)?;
         let (new_point, new_origin) = sample_frame(scene, &p.site);
         let allowance =

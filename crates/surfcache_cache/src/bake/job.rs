@@ -389,6 +389,10 @@ impl BakeJob {
         else {
             return false;
         };
+        // Later passes on the same layout take this pass' probes instead of probing again.
+        if let Some((_, layout)) = &mut self.layout {
+            layout.adopt_probes(&cache);
+        }
         self.passes.push(Arc::new(cache));
         if self.final_pass {
             self.done.finished = true;

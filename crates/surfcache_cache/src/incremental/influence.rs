@@ -30,10 +30,16 @@
 //!   above [`BRIGHT_FACTOR`] × the map's mean) and punctual lights. Their shadows are
 //!   traced from the sources away from the light, and every point within R of such a
 //!   hit is re-estimated outright.
-//! - **Indirect stages** ([`Influence::of_changes`]). A source triangle t is drawn in
-//!   proportion to `ΔL_t · A_t`, with `ΔL_t = ρ_t/π · ΔE_t` and ΔE_t the largest change on
-//!   it. A hit then carries `w = πΦ/N · ΔL(s)/ΔL_t`, where `Φ = Σ ΔL_t · A_t` over both
-//!   sides and ΔL(s) is the signed change where the ray left.
+//! - **Indirect stages** ([`Influence::of_changes`]). The sources are [`ChangePatch`]es:
+//!   every texel of a lightmap whose irradiance the stage before changed (at its sample
+//!   point, with the area it stands for), or for the other caches both sides of every
+//!   triangle with the largest change on it. A patch p is drawn in proportion to
+//!   `ΔL_p · A_p`, with `ΔL_p = ρ_p/π · ΔE_p`. A hit then carries
+//!   `w = πΦ/N · ΔL(s)/ΔL_p`, where `Φ = Σ ΔL_p · A_p` over the patches' sides and ΔL(s)
+//!   is the signed change where the ray left. Texels make the weights nearly constant:
+//!   rays go where the change is, not where the largest change of a large triangle is.
+//!   Buried texels are no sources (their values are filled in from neighbours; no
+//!   surface sees their light).
 //!
 //! A point is re-estimated when `Q + 2σ_Q` exceeds its allowance (σ_Q from the sum of
 //! w²), when a shadow hit lies within R, or when it lies on a changed triangle itself.
@@ -43,9 +49,14 @@
 //! number of rays is chosen so that this takes a view of the source far smaller than the
 //! allowance allows: [`RAYS_PER_DISC`] rays per disc of radius R on the sources.
 
-use glam::{IVec3, Vec3};
+use glam::{IVec3, Vec2, Vec3};
 use rayon::prelude::*;
-use std::{collections::HashMap, f32::consts::PI, ops::Range};
+use std::{
+    collections::HashMap,
+    f32::consts::PI,
+    ops::Range,
+    sync::atomic::{AtomicU64, Ordering::Relaxed},
+};
 use surfcache_core::Light;
 use surfcache_core::{
     EnvironmentSampler,
@@ -87,6 +98,11 @@ pub struct Influence {
     /// Per triangle of the edited scene: a changed triangle, always re-estimated.
     changed: Vec<bool>,
     rays: u64,
+    /// Source triangles and their flux Σ |ΔL| · A (both sides).
+    sources: (usize, f32),
+    /// Why points were reached: on a changed triangle, near a shadow hit, by Q alone, by
+    /// Q + 2σ only; and points kept.
+    tally: [AtomicU64; 5],
 }
 
 /// One forward hit: where, the normal of the side it arrived at, its weight.
@@ -103,55 +119,106 @@ impl ForwardHit {
     }
 }
 
-/// The sides of some triangles of a scene, drawn by weight × area.
-struct SourceSides<'a> {
+/// Which sides of a triangle a [`ChangePatch`] stands for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    Front,
+    Back,
+    Both,
+}
+
+impl Side {
+    fn count(self) -> f32 {
+        match self {
+            Self::Both => 2.0,
+            _ => 1.0,
+        }
+    }
+}
+
+/// A part of a surface whose irradiance changed, as a source of forward rays: a texel
+/// (at its sample point `uv`) or a whole triangle (`uv` `None`: drawn uniformly over it),
+/// the world area it stands for on each of its sides, and the largest change of its
+/// irradiance in any channel (W/m²; infinite where it is unknown).
+#[derive(Clone, Copy, Debug)]
+pub struct ChangePatch {
+    pub triangle: u32,
+    pub side: Side,
+    pub uv: Option<Vec2>,
+    pub area: f32,
+    pub change: f32,
+}
+
+/// Source patches of a scene, drawn by weight × area.
+struct Sources<'a> {
     scene: &'a TracedScene,
-    triangles: Vec<u32>,
+    patches: Vec<ChangePatch>,
+    /// Each patch's weight per unit area (the bound of its |ΔL|, or 1).
+    weights: Vec<f32>,
     choice: Distribution1D,
-    /// Σ weight × area over both sides.
+    /// Σ weight × area over the patches' sides.
     total: f32,
-    /// Σ area over both sides.
+    /// Σ area over the patches' sides.
     area: f32,
 }
 
-impl<'a> SourceSides<'a> {
-    fn new(scene: &'a TracedScene, triangles: &[u32], weight: impl Fn(u32) -> f32) -> Self {
-        let triangles: Vec<u32> = triangles
-            .iter()
-            .copied()
-            .filter(|&t| weight(t) > 0.0)
-            .collect();
-        let areas: Vec<f32> = triangles
-            .iter()
-            .map(|&t| {
-                let [a, b, c] = scene.positions()[t as usize];
-                triangle_area(a, b, c)
+impl<'a> Sources<'a> {
+    /// The patches whose `weight` is positive.
+    fn new(
+        scene: &'a TracedScene,
+        patches: impl IntoIterator<Item = ChangePatch>,
+        weight: impl Fn(&ChangePatch) -> f32,
+    ) -> Self {
+        let (patches, weights): (Vec<ChangePatch>, Vec<f32>) = patches
+            .into_iter()
+            .map(|p| {
+                let w = weight(&p);
+                (p, w)
             })
-            .collect();
-        let weighted: Vec<f32> = triangles
-            .iter()
-            .zip(&areas)
-            .map(|(&t, &a)| weight(t) * a)
-            .collect();
+            .filter(|&(_, w)| w > 0.0)
+            .unzip();
+        let sides: Vec<f32> = patches.iter().map(|p| p.area * p.side.count()).collect();
+        let weighted: Vec<f32> = sides.iter().zip(&weights).map(|(a, w)| a * w).collect();
         Self {
             scene,
             choice: Distribution1D::new(&weighted),
-            total: 2.0 * weighted.iter().sum::<f32>(),
-            area: 2.0 * areas.iter().sum::<f32>(),
-            triangles,
+            total: weighted.iter().sum(),
+            area: sides.iter().sum(),
+            patches,
+            weights,
         }
     }
 
-    fn is_empty(&self) -> bool {
-        self.triangles.is_empty() || self.total.is_nan() || self.total <= 0.0
+    /// Both sides of each of `triangles`, weight 1.
+    fn triangles(scene: &'a TracedScene, triangles: &[u32]) -> Self {
+        let patches = triangles.iter().map(|&t| {
+            let [a, b, c] = scene.positions()[t as usize];
+            ChangePatch {
+                triangle: t,
+                side: Side::Both,
+                uv: None,
+                area: triangle_area(a, b, c),
+                change: 1.0,
+            }
+        });
+        Self::new(scene, patches, |_| 1.0)
     }
 
-    /// A point on a side drawn by weight × area.
-    fn sample(&self, rng: &mut Rng) -> SurfacePoint {
+    fn is_empty(&self) -> bool {
+        self.patches.is_empty() || self.total.is_nan() || self.total <= 0.0
+    }
+
+    /// A point on a side of a patch drawn by weight × area, and the patch's index.
+    fn sample(&self, rng: &mut Rng) -> (SurfacePoint, usize) {
         let (k, _, _) = self.choice.sample(rng.next_f32());
-        let front = rng.next_f32() < 0.5;
-        self.scene
-            .surface_point(self.triangles[k], uniform_triangle(rng.next_vec2()), front)
+        let p = &self.patches[k];
+        let front = match p.side {
+            Side::Front => true,
+            Side::Back => false,
+            Side::Both => rng.next_f32() < 0.5,
+        };
+        let uv = p.uv.unwrap_or_else(|| uniform_triangle(rng.next_vec2()));
+        (self.scene.surface_point(p.triangle, uv, front), k)
     }
 
     /// This set's share of a stage's `rays` over sources of total area `area`.
@@ -212,8 +279,8 @@ impl Influence {
             next_event: false,
         };
         let sets = [
-            SourceSides::new(old, changed_old, |_| 1.0),
-            SourceSides::new(new, changed_new, |_| 1.0),
+            Sources::triangles(old, changed_old),
+            Sources::triangles(new, changed_new),
         ];
         let area: f32 = sets.iter().map(|s| s.area).sum();
         let (total_rays, radius) = rays_and_radius(area, spacing, new.triangle_count());
@@ -229,7 +296,7 @@ impl Influence {
                 .into_par_iter()
                 .map(|i| {
                     let mut rng = Rng::new(stream, i as u64);
-                    let s = sources.sample(&mut rng);
+                    let (s, _) = sources.sample(&mut rng);
                     let (o, d) = sources.leave(&s, &mut rng);
                     let Some(x) = first_hit(scene, o, d) else {
                         return (None, 1);
@@ -264,53 +331,64 @@ impl Influence {
         for &t in changed_new {
             changed[t as usize] = true;
         }
-        Self::from_hits(hits, radius, changed, rays)
+        let sources = sets
+            .iter()
+            .map(|s| (s.patches.len(), s.total))
+            .fold((0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+        Self::from_hits(hits, radius, changed, rays, sources)
     }
 
-    /// An indirect stage's influence (module docs): triangles of `scene` whose
-    /// irradiance changed by up to `changes[t]` ([`super::triangle_changes`]) traced
-    /// forward, each ray weighted by the signed change `after − before` at the point it
-    /// leaves. Triangles with `ρ·ΔE_t ≤ negligible` are left out: seen over a whole
-    /// hemisphere, all of them together change a point's E by at most that much.
+    /// An indirect stage's influence (module docs): the patches of `scene` whose
+    /// irradiance changed ([`super::change_patches`]) traced forward, each ray weighted
+    /// by the signed change `after − before` at the point it leaves. Patches with
+    /// `ρ·ΔE ≤ negligible` are left out: seen over a whole hemisphere, all of them
+    /// together change a point's E by at most that much.
     #[allow(clippy::too_many_arguments)]
     pub fn of_changes(
         scene: &TracedScene,
         after: &dyn IrradianceLookup,
         before: &dyn IrradianceLookup,
-        changes: &[f32],
+        changes: &[ChangePatch],
         negligible: f32,
         spacing: f32,
         seed: u64,
     ) -> Self {
-        let radiance = |t: u32| {
-            let albedo = scene.material_of(t).albedo.max_element().max(0.0);
-            albedo / PI * changes[t as usize]
+        // The bound of |ΔL| = ρ/π · |ΔE| on a patch.
+        let radiance = |p: &ChangePatch| {
+            let albedo = scene.material_of(p.triangle).albedo.max_element().max(0.0);
+            albedo / PI * p.change
         };
-        let changed: Vec<u32> = (0..changes.len() as u32)
-            .filter(|&t| {
-                let most = PI * radiance(t);
-                most.is_nan() || most > negligible
-            })
-            .collect();
+        let matters = |p: &&ChangePatch| {
+            let most = PI * radiance(p);
+            most.is_nan() || most > negligible
+        };
+        // A change that is not a number (an unbaked side) may be anything: whatever its
+        // patches see is re-estimated.
+        let known = |p: &ChangePatch| {
+            let l = radiance(p);
+            if l.is_finite() { l } else { 0.0 }
+        };
+        let unknown = |p: &ChangePatch| {
+            if radiance(p).is_finite() { 0.0 } else { 1.0 }
+        };
+        let sets = [
+            (
+                Sources::new(scene, changes.iter().filter(matters).copied(), known),
+                false,
+            ),
+            (
+                Sources::new(scene, changes.iter().filter(matters).copied(), unknown),
+                true,
+            ),
+        ];
+        let stream = splitmix64(seed ^ 0x696e_6469_7265_6374);
         let mut hits = Vec::new();
         let mut rays = 0;
-        // A change that is not a number (an unbaked side) may be anything: whatever its
-        // triangles see is re-estimated.
-        let unknown: Vec<u32> = changed
-            .iter()
-            .copied()
-            .filter(|&t| !radiance(t).is_finite())
-            .collect();
-        let sources = SourceSides::new(scene, &changed, |t| {
-            let l = radiance(t);
-            if l.is_finite() { l } else { 0.0 }
-        });
-        let stream = splitmix64(seed ^ 0x696e_6469_7265_6374);
-        let sets = [
-            (sources, false),
-            (SourceSides::new(scene, &unknown, |_| 1.0), true),
-        ];
         let area: f32 = sets.iter().map(|(s, _)| s.area).sum();
+        let source_stats = (
+            sets.iter().map(|(s, _)| s.patches.len()).sum(),
+            sets[0].0.total,
+        );
         let (total_rays, radius) = rays_and_radius(area, spacing, scene.triangle_count());
         for (sources, certain) in sets {
             let n = sources.share(total_rays, area);
@@ -322,12 +400,13 @@ impl Influence {
                 .into_par_iter()
                 .map(|i| {
                     let mut rng = Rng::new(stream ^ certain as u64, i as u64);
-                    let s = sources.sample(&mut rng);
+                    let (s, k) = sources.sample(&mut rng);
                     let (o, d) = sources.leave(&s, &mut rng);
                     let weight = if certain {
                         Vec3::INFINITY
                     } else {
-                        // Drawn by the bound ΔL_t: the ray carries ΔL(s) / ΔL_t of it.
+                        // Drawn by the bound of |ΔL| on the patch: the ray carries ΔL(s)
+                        // over that bound.
                         let front =
                             s.geometric_normal == scene.geometric_normals()[s.triangle as usize];
                         let change = match (
@@ -341,7 +420,7 @@ impl Influence {
                             .material_of(s.triangle)
                             .albedo_at(scene.uv0_at(s.triangle, s.uv));
                         let delta = albedo / PI * change;
-                        scale * delta / radiance(s.triangle)
+                        scale * delta / sources.weights[k]
                     };
                     if weight == Vec3::ZERO || weight.is_nan() {
                         return None;
@@ -356,14 +435,20 @@ impl Influence {
             rays += n as u64;
             hits.extend(found.into_iter().flatten());
         }
-        Self::from_hits(hits, radius, Vec::new(), rays)
+        Self::from_hits(hits, radius, Vec::new(), rays, source_stats)
     }
 
     /// Hits binned by grid cell of size R; a cell with more than [`HITS_PER_CELL`] finite
     /// (or infinite) hits keeps an even subset of them, the finite ones' weights scaled so
     /// that their sum stays the same in expectation: queries then cost a bounded amount,
     /// however many rays a small scene concentrates.
-    fn from_hits(mut hits: Vec<ForwardHit>, radius: f32, changed: Vec<bool>, rays: u64) -> Self {
+    fn from_hits(
+        mut hits: Vec<ForwardHit>,
+        radius: f32,
+        changed: Vec<bool>,
+        rays: u64,
+        sources: (usize, f32),
+    ) -> Self {
         let cell = |p: Vec3| (p / radius).floor().as_ivec3();
         hits.sort_by_key(|h| {
             let c = cell(h.position);
@@ -402,7 +487,27 @@ impl Influence {
             weight: kept.iter().map(|h| h.weight).collect(),
             changed,
             rays,
+            sources,
+            tally: Default::default(),
         }
+    }
+
+    /// What the influence found and decided so far, for `SURFCACHE_TRACE_PASSES`.
+    pub fn report(&self) -> String {
+        let t: Vec<u64> = self.tally.iter().map(|c| c.load(Relaxed)).collect();
+        format!(
+            "sources {} flux {:.4} rays {} radius {:.3} hits {} | reached: changed {} shadow {} q {} sigma {} | kept {}",
+            self.sources.0,
+            self.sources.1,
+            self.rays,
+            self.radius,
+            self.position.len(),
+            t[0],
+            t[1],
+            t[2],
+            t[3],
+            t[4]
+        )
     }
 
     /// Rays traced to find the influence.
@@ -415,9 +520,20 @@ impl Influence {
     /// `Q + 2σ_Q > allowance` ([`Self::change_at`]).
     pub fn reaches(&self, triangle: u32, x: Vec3, n: Vec3, allowance: f32) -> bool {
         if self.changed.get(triangle as usize) == Some(&true) {
+            self.tally[0].fetch_add(1, Relaxed);
             return true;
         }
         let (q, sigma) = self.change_at(x, n);
+        let k = if q == f32::INFINITY {
+            1
+        } else if q > allowance {
+            2
+        } else if q + 2.0 * sigma > allowance {
+            3
+        } else {
+            4
+        };
+        self.tally[k].fetch_add(1, Relaxed);
         q + 2.0 * sigma > allowance
     }
 
@@ -470,7 +586,7 @@ type TowardsLight<'a> = Box<dyn Fn(Vec3, &mut Rng) -> Option<Vec3> + Sync + 'a>;
 
 /// The shadows of bright lights cast by `sources` (module docs): `n` rays per light
 /// from source points away from the light; every hit is marked with an infinite weight.
-fn shadow_hits(sources: &SourceSides, n: u32, stream: u64) -> (Vec<ForwardHit>, u64) {
+fn shadow_hits(sources: &Sources, n: u32, stream: u64) -> (Vec<ForwardHit>, u64) {
     let scene = sources.scene;
     let mut lights: Vec<TowardsLight> = Vec::new();
     if let Some(map) = &scene.environment().map
@@ -502,7 +618,7 @@ fn shadow_hits(sources: &SourceSides, n: u32, stream: u64) -> (Vec<ForwardHit>, 
             .into_par_iter()
             .map(|i| {
                 let mut rng = Rng::new(stream ^ splitmix64(0x5ad0 + k as u64), i as u64);
-                let s = sources.sample(&mut rng);
+                let (s, _) = sources.sample(&mut rng);
                 let w = towards(s.position, &mut rng)?;
                 // Leave from the side that faces away from the light.
                 let front = scene.geometric_normals()[s.triangle as usize].dot(w) < 0.0;

@@ -35,10 +35,12 @@
 //!
 //! **Which points a stage touches.** Before each stage, its sources (the edited
 //! surfaces, then the surfaces whose irradiance the stage before changed) are traced
-//! forward ([`Influence`]). A point keeps its value, with no ray traced and no noise
+//! forward ([`Influence`]; the indirect stages' sources texel by texel for lightmaps,
+//! [`change_patches`]). A point keeps its value, with no ray traced and no noise
 //! added, unless the forward hits near it estimate a change above its share of the error
 //! bound, a bright light's shadow from a source falls near it, or it lies on an edited
-//! surface. In a level, the points that face an edited prop but do not see it, most of
+//! surface. A point found buried stays buried in the indirect stages (no surface moves
+//! there): its filled value is filled in again from its neighbours. In a level, the points that face an edited prop but do not see it, most of
 //! them, are left alone this way.
 //!
 //! Points where estimating the change is dearer than estimating E afresh (a shadow moved
@@ -55,12 +57,13 @@
 mod influence;
 
 pub use influence::{
-    BRIGHT_FACTOR, Influence, MAX_RAYS, MIN_RAYS, RAYS_PER_DISC, RAYS_PER_TRIANGLE,
+    BRIGHT_FACTOR, ChangePatch, Influence, MAX_RAYS, MIN_RAYS, RAYS_PER_DISC, RAYS_PER_TRIANGLE,
+    Side,
 };
 
 use crate::{
     Cache, SurfaceCache, UNMAPPED,
-    bake::{BakeOutcome, Baker, JobProgress, Previous, step_pass},
+    bake::{BakeOutcome, Baker, JobProgress, Previous, TRACE_PASSES_VAR, step_pass},
     stored_rgb::difference_beyond,
 };
 use glam::{Vec2, Vec3};
@@ -171,6 +174,8 @@ pub struct IncrementalJob {
     baker: Option<Baker<Cache>>,
     /// The cache after each finished stage.
     stages: Vec<Arc<Cache>>,
+    /// The running stage's influence.
+    influence: Option<Arc<Influence>>,
     done: JobProgress,
     result: Option<Arc<Cache>>,
 }
@@ -186,6 +191,7 @@ impl IncrementalJob {
             stage: 0,
             baker: None,
             stages: Vec::new(),
+            influence: None,
             done: JobProgress {
                 passes: 1 + INDIRECT_STAGES,
                 ..Default::default()
@@ -223,7 +229,7 @@ impl IncrementalJob {
                 .before
                 .cache()
                 .remap(&self.old_scene, scene, &self.edit.triangle_map);
-            let influence = Influence::of_edit(
+            let influence = Arc::new(Influence::of_edit(
                 &self.old_scene,
                 scene,
                 self.before.cache().as_ref(),
@@ -232,7 +238,8 @@ impl IncrementalJob {
                 &self.edit.changed_new,
                 self.sample_spacing(scene),
                 settings.seed,
-            );
+            ));
+            self.influence = Some(influence.clone());
             Baker::new(cache, settings.estimator, settings.seed)
                 .with_gather(self.old_lookup())
                 .with_previous(Previous {
@@ -241,7 +248,8 @@ impl IncrementalJob {
                     gather: Some(self.before.cache().clone()),
                     focus: Some(sphere),
                     bound: None,
-                    influence: Some(Arc::new(influence)),
+                    influence: Some(influence),
+                    geometry_changed: true,
                 })
         } else {
             let k = self.stage as usize;
@@ -264,32 +272,29 @@ impl IncrementalJob {
             // estimates ([`CHANGE_ERROR_SHARE`] of its bound) is not passed on: noise
             // would otherwise spread one stage further each time.
             let noise = |bound: f32| 2.0 * CHANGE_ERROR_SHARE * bound;
-            let changes = match k {
-                1 => triangle_changes(
-                    &latest,
-                    self.before.cache(),
-                    &self.edit.triangle_map,
-                    noise(settings.estimator.max_rel_error),
-                ),
-                _ => triangle_changes(
-                    &latest,
-                    &self.stages[k - 2],
-                    &identity,
-                    noise(estimator.max_rel_error),
-                ),
+            let (before_cache, map) = match k {
+                1 => (self.before.cache(), &self.edit.triangle_map),
+                _ => (&self.stages[k - 2], &identity),
             };
+            let share = noise(match k {
+                1 => settings.estimator.max_rel_error,
+                _ => estimator.max_rel_error,
+            });
+            let changes = triangle_changes(&latest, before_cache, map, share);
+            let patches = change_patches(scene, &latest, before_cache, map, &changes, share);
             let bound = ChangeBound::new(scene, &changes);
             // Changes a quarter of the smallest allowance at most, all of them together.
             let negligible = 0.25 * SKIP_SHARE * estimator.max_rel_error * estimator.floor;
-            let influence = Influence::of_changes(
+            let influence = Arc::new(Influence::of_changes(
                 scene,
                 latest.as_ref(),
                 before.as_ref(),
-                &changes,
+                &patches,
                 negligible,
                 self.sample_spacing(scene),
                 settings.seed ^ k as u64,
-            );
+            ));
+            self.influence = Some(influence.clone());
             Baker::new(
                 cache,
                 estimator,
@@ -302,7 +307,8 @@ impl IncrementalJob {
                 gather: Some(before),
                 focus: None,
                 bound: Some(Arc::new(bound)),
-                influence: Some(Arc::new(influence)),
+                influence: Some(influence),
+                geometry_changed: false,
             })
         };
         self.baker = Some(baker);
@@ -326,6 +332,11 @@ impl IncrementalJob {
         ) else {
             return false;
         };
+        if let Some(influence) = self.influence.take()
+            && std::env::var_os(TRACE_PASSES_VAR).is_some()
+        {
+            eprintln!("[stage {}] {}", self.stage, influence.report());
+        }
         let cache = Arc::new(cache);
         if self.stage < INDIRECT_STAGES {
             self.stages.push(cache);
@@ -409,6 +420,38 @@ pub fn triangle_changes(
                 }
             }
             change
+        })
+        .collect()
+}
+
+/// The patches whose irradiance changed between `before` (looked up on
+/// `triangle_map[t]`) and `after`, as sources of an indirect stage's forward rays
+/// ([`Influence::of_changes`]): every texel of a lightmap that changed beyond `share`
+/// ([`Lightmaps::texel_changes`](crate::lightmap::Lightmaps::texel_changes)), for the
+/// other caches both sides of every triangle with its largest change `changes[t]`
+/// ([`triangle_changes`]).
+pub fn change_patches(
+    scene: &TracedScene,
+    after: &Cache,
+    before: &Cache,
+    triangle_map: &[u32],
+    changes: &[f32],
+    share: f32,
+) -> Vec<ChangePatch> {
+    if let (Cache::Lightmap(a), Cache::Lightmap(b)) = (after, before) {
+        return a.texel_changes(scene, b, triangle_map, share);
+    }
+    (0..changes.len() as u32)
+        .filter(|&t| changes[t as usize] > 0.0 || changes[t as usize].is_nan())
+        .map(|t| {
+            let [a, b, c] = scene.positions()[t as usize];
+            ChangePatch {
+                triangle: t,
+                side: Side::Both,
+                uv: None,
+                area: surfcache_core::geometry::triangle_area(a, b, c),
+                change: changes[t as usize],
+            }
         })
         .collect()
 }

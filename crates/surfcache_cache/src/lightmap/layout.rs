@@ -83,6 +83,7 @@ impl Lightmaps {
             foot_lines: Vec::new(),
             foot_samples: 0,
             guides: TexelGuides::default(),
+            probed: None,
             emitted: false,
             packed: vec![[0; 3]; layers * layer_texels],
             sample_counts: Vec::new(),

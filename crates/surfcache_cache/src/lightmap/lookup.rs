@@ -2,7 +2,7 @@
 //! that cross each texel's footprint, and the bilinear lookup that keeps texels beyond
 //! such a crossing out.
 
-use super::Lightmaps;
+use super::{Lightmaps, Probed};
 use crate::{
     crossings::{self, Probe},
     stored_rgb::{StoreScale, StoredRgb},
@@ -17,18 +17,39 @@ use surfcache_trace::TracedScene;
 const EXIT_REACH: f32 = 0.75;
 
 impl Lightmaps {
+    /// Takes `other`'s probes where it has the same layout ([`crate::Cache::adopt_probes`]).
+    pub(crate) fn adopt_probes(&mut self, other: &Lightmaps) {
+        if (self.layers, self.layer_texels) == (other.layers, other.layer_texels)
+            && self.maps == other.maps
+            && self.owner == other.owner
+        {
+            self.probed = other.probed.clone();
+        }
+    }
+
     /// Probes every owned slot for crossings near its texel ([`crossings::probe`], as far
     /// as [`crossings::LINE_REACH`] texels): records exits within its footprint
     /// ([`EXIT_REACH`]) for buried texels, and each crossing as a line in UV1 space with
     /// its foot for lookups.
     pub(super) fn probe_crossings(&mut self, scene: &TracedScene) {
         let total = self.layers * self.layer_texels;
-        let probes: Vec<(Vec2, Probe)> = (0..total)
+        // A re-bake carries the probes of slots that no changed surface came near
+        // ([`Probed::stale`]).
+        let carried = self.probed.take().filter(|p| p.site_uv.len() == total);
+        let keeps = |slot: usize| {
+            carried
+                .as_deref()
+                .is_some_and(|p| !p.stale.get(slot).copied().unwrap_or(false))
+        };
+        let probes: Vec<Option<(Vec2, Probe)>> = (0..total)
             .into_par_iter()
             .map(|slot| {
+                if keeps(slot) {
+                    return None;
+                }
                 let (layer, i) = (slot / self.layer_texels, slot % self.layer_texels);
                 let uv = self.sample_uv[i];
-                match self.owner[i] {
+                Some(match self.owner[i] {
                     NO_INDEX => (uv, Probe::default()),
                     t => {
                         let m = &self.maps[self.triangle_instance[t as usize] as usize];
@@ -53,28 +74,53 @@ impl Lightmaps {
                         }
                         (site, probe)
                     }
-                }
+                })
             })
             .collect();
-        self.site_uv = probes.iter().map(|(uv, _)| *uv).collect();
-        self.exits = probes.iter().map(|(_, p)| p.exit).collect();
-        self.crossing_slot = vec![NO_INDEX; total];
-        self.crossing_lines.clear();
-        self.foot_sites.clear();
-        for (slot, (uv, probe)) in probes.iter().enumerate() {
-            let Some(line) = probe.crossing else { continue };
-            let t = self.owner[slot % self.layer_texels];
-            let front = slot < self.layer_texels;
-            let corners = self.uv1[t as usize];
-            let Some((kept, foot)) =
-                crossings::SampleCrossing::new(scene, t, front, &line, corners, *uv)
-            else {
-                continue;
+        let mut found = Probed {
+            site_uv: Vec::with_capacity(total),
+            exits: Vec::with_capacity(total),
+            crossing_slot: vec![NO_INDEX; total],
+            ..Default::default()
+        };
+        for (slot, probe) in probes.into_iter().enumerate() {
+            let crossing = match (probe, carried.as_deref()) {
+                (Some((uv, probe)), _) => {
+                    found.site_uv.push(uv);
+                    found.exits.push(probe.exit);
+                    probe.crossing.and_then(|line| {
+                        let t = self.owner[slot % self.layer_texels];
+                        let front = slot < self.layer_texels;
+                        let corners = self.uv1[t as usize];
+                        crossings::SampleCrossing::new(scene, t, front, &line, corners, uv)
+                    })
+                }
+                (None, Some(p)) => {
+                    found.site_uv.push(p.site_uv[slot]);
+                    found.exits.push(p.exits[slot]);
+                    let c = p.crossing_slot[slot];
+                    (c != NO_INDEX)
+                        .then(|| (p.crossing_lines[c as usize], p.foot_sites[c as usize]))
+                }
+                // (Not reached: a slot is carried only when there are probes to carry.)
+                (None, None) => {
+                    found.site_uv.push(self.sample_uv[slot % self.layer_texels]);
+                    found.exits.push(None);
+                    None
+                }
             };
-            self.crossing_slot[slot] = self.crossing_lines.len() as u32;
-            self.crossing_lines.push(kept);
-            self.foot_sites.push(foot);
+            if let Some((line, foot)) = crossing {
+                found.crossing_slot[slot] = found.crossing_lines.len() as u32;
+                found.crossing_lines.push(line);
+                found.foot_sites.push(foot);
+            }
         }
+        self.site_uv = found.site_uv.clone();
+        self.exits = found.exits.clone();
+        self.crossing_slot = found.crossing_slot.clone();
+        self.crossing_lines = found.crossing_lines.clone();
+        self.foot_sites = found.foot_sites.clone();
+        self.probed = Some(std::sync::Arc::new(found));
     }
 }
 

@@ -113,6 +113,21 @@ impl Default for LightmapSettings {
     }
 }
 
+/// The results of probing every slot for crossings ([`Lightmaps::probe_crossings`]),
+/// per slot of the layout: where it is estimated, its exit, its crossing line (index into
+/// the lines and their feet). A probe sees the surfaces within [`crossings::LINE_REACH`]
+/// texels only, so a re-bake carries the probes of slots far from every changed surface
+/// and probes again only the `stale` ones (all, where `stale` is empty, are carried).
+#[derive(Clone, Debug, Default)]
+struct Probed {
+    site_uv: Vec<Vec2>,
+    exits: Vec<Option<Vec2>>,
+    crossing_slot: Vec<u32>,
+    crossing_lines: Vec<crossings::SampleCrossing>,
+    foot_sites: Vec<Option<Vec2>>,
+    stale: Vec<bool>,
+}
+
 /// One instance's texture within the flat texel arrays of a layer.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 struct InstanceMap {
@@ -154,7 +169,8 @@ pub struct Lightmaps {
     #[serde(skip)]
     priors: Vec<Option<Prior>>,
     /// Before an edit, per texel slot of a kept layout: its crossing and the value at
-    /// the crossing's foot, the foot's prior where the crossing is the same after it.
+    /// the crossing's foot (NaN: buried), the foot's prior where the crossing is the same
+    /// after it.
     #[serde(skip)]
     prior_feet: std::collections::HashMap<u32, (crossings::SampleCrossing, Vec3)>,
     /// Texel slots whose estimate was buried (their stored value was filled from
@@ -208,15 +224,20 @@ pub struct Lightmaps {
     foot_sites: Vec<Option<Vec2>>,
     #[serde(skip)]
     feet: Vec<Vec3>,
-    /// The line of each foot point of the current round (after its texel points).
+    /// The line of each foot point of the current round (after its texel points), and
+    /// whether the foot was buried before an edit (it stays buried unless estimated).
     #[serde(skip)]
-    foot_lines: Vec<u32>,
+    foot_lines: Vec<(u32, bool)>,
     /// Hemisphere samples the feet took (counted in the statistics).
     #[serde(skip)]
     foot_samples: u64,
     /// While baking: every round's records and the guides of the next round.
     #[serde(skip)]
     guides: TexelGuides,
+    /// What [`Self::probe_crossings`] found over the scene this cache was laid out over,
+    /// kept for re-bakes ([`Probed`]).
+    #[serde(skip)]
+    probed: Option<std::sync::Arc<Probed>>,
     emitted: bool,
     /// Stored texels of all layers.
     packed: Vec<StoredRgb>,

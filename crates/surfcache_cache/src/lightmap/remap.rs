@@ -1,10 +1,19 @@
 //! Incremental re-bakes: a layout carried over to an edited scene with its values as
 //! priors, and the change of each triangle's texels between two bakes.
 
-use super::{BuiltInstance, Lightmaps, build_instance};
-use crate::{Prior, UNMAPPED, stored_rgb::difference_beyond};
+use super::{BuiltInstance, Lightmaps, Probed, build_instance};
+use crate::{
+    Prior, SurfaceCache, UNMAPPED, crossings,
+    incremental::{ChangePatch, Side},
+    stored_rgb::difference_beyond,
+};
 use glam::{Vec2, Vec3};
-use surfcache_core::index::NO_INDEX;
+use rayon::prelude::*;
+use std::sync::Arc;
+use surfcache_core::{
+    geometry::{interpolate, triangle_area},
+    index::NO_INDEX,
+};
 use surfcache_trace::TracedScene;
 
 impl Lightmaps {
@@ -68,10 +77,15 @@ impl Lightmaps {
                         Prior::Estimated(value)
                     });
                     if let Some(&c) = self.crossing_slot.get(old_slot)
-                        && c != NO_INDEX
+                        && let Some(&stored) = self.crossing_feet.get(c as usize)
                     {
-                        let foot = self.scale.unpack(self.crossing_feet[c as usize]);
-                        prior_feet.insert(slot as u32, (self.crossing_lines[c as usize], foot));
+                        // A line settled without its foot had a buried one: NaN.
+                        let line = self.crossing_lines[c as usize];
+                        let foot = match line.foot == line.site {
+                            true => Vec3::NAN,
+                            false => self.scale.unpack(stored),
+                        };
+                        prior_feet.insert(slot as u32, (line, foot));
                     }
                 }
             }
@@ -79,6 +93,7 @@ impl Lightmaps {
         }
         fresh.priors = priors;
         fresh.prior_feet = prior_feet;
+        fresh.probed = self.carried_probes(&fresh, &reused, old, new, triangle_map);
         fresh
     }
     /// Per triangle (of the scene `self` was laid out over): the largest change, in any
@@ -145,5 +160,235 @@ impl Lightmaps {
         (first.y..=last.y).flat_map(move |y| {
             (first.x..=last.x).map(move |x| self.scale.unpack(texels[(y * m.width + x) as usize]))
         })
+    }
+}
+
+impl Lightmaps {
+    /// The probes of `self` (laid out over `old`) carried onto `fresh`, its remap onto
+    /// `new` ([`Probed`]): a slot of a kept layout takes its old probe unless a surface
+    /// that the edit changed lies within twice a probe's reach of it; every other slot
+    /// is probed again.
+    fn carried_probes(
+        &self,
+        fresh: &Lightmaps,
+        reused: &[Option<usize>],
+        old: &TracedScene,
+        new: &TracedScene,
+        triangle_map: &[u32],
+    ) -> Option<Arc<Probed>> {
+        let p = self.probed.as_deref()?;
+        if p.site_uv.len() != self.layers * self.layer_texels || fresh.layers != self.layers {
+            return None;
+        }
+        let region = changed_region(old, new, triangle_map);
+        let total = fresh.layers * fresh.layer_texels;
+        let mut out = Probed {
+            site_uv: vec![Vec2::ZERO; total],
+            exits: vec![None; total],
+            crossing_slot: vec![NO_INDEX; total],
+            stale: vec![true; total],
+            ..Default::default()
+        };
+        for (i, io) in reused.iter().enumerate() {
+            let Some(io) = *io else { continue };
+            let (m, m_old) = (fresh.maps[i], self.maps[io]);
+            let reach = Vec3::splat(
+                2.0 * crossings::LINE_REACH / m.texels_per_metre.max(f32::MIN_POSITIVE),
+            );
+            for k in 0..m.texels() {
+                let t = fresh.owner[m.offset + k];
+                if t == NO_INDEX {
+                    continue;
+                }
+                let [a, b, c] = new.positions()[t as usize];
+                let x = interpolate(a, b, c, fresh.sample_uv[m.offset + k]);
+                if region
+                    .is_some_and(|(lo, hi)| x.cmpge(lo - reach).all() && x.cmple(hi + reach).all())
+                {
+                    continue;
+                }
+                for layer in 0..fresh.layers {
+                    let slot = layer * fresh.layer_texels + m.offset + k;
+                    let old_slot = layer * self.layer_texels + m_old.offset + k;
+                    out.stale[slot] = false;
+                    out.site_uv[slot] = p.site_uv[old_slot];
+                    out.exits[slot] = p.exits[old_slot];
+                    let c = p.crossing_slot[old_slot];
+                    if c != NO_INDEX {
+                        out.crossing_slot[slot] = out.crossing_lines.len() as u32;
+                        out.crossing_lines.push(p.crossing_lines[c as usize]);
+                        out.foot_sites.push(p.foot_sites[c as usize]);
+                    }
+                }
+            }
+        }
+        Some(Arc::new(out))
+    }
+
+    /// Every owned texel, not buried, whose value changed beyond `share` ([`difference_beyond`])
+    /// against `before` looked up on `triangle_map[t]`: texel against texel where the
+    /// triangle kept its layout, against `before`'s lookup at the texel's sample point
+    /// elsewhere (zero where the triangle did not exist before). Each texel as a
+    /// [`ChangePatch`] at its sample point, with the world area it stands for.
+    pub fn texel_changes(
+        &self,
+        scene: &TracedScene,
+        before: &Lightmaps,
+        triangle_map: &[u32],
+        share: f32,
+    ) -> Vec<ChangePatch> {
+        // World area per texel of each triangle: its area over its UV1 area in texels.
+        let texel_area = |t: u32| {
+            let [a, b, c] = scene.positions()[t as usize];
+            let m = &self.maps[self.triangle_instance[t as usize] as usize];
+            let [p, q, r] = self.uv1[t as usize];
+            let texels = 0.5 * ((q - p).perp_dot(r - p)).abs() * (m.width as f32 * m.height as f32);
+            triangle_area(a, b, c) / texels.max(f32::MIN_POSITIVE)
+        };
+        let kept_layout = |t: usize, t_old: u32| {
+            t_old != UNMAPPED && {
+                let (m, mo) = (
+                    &self.maps[self.triangle_instance[t] as usize],
+                    &before.maps[before.triangle_instance[t_old as usize] as usize],
+                );
+                (m.width, m.height) == (mo.width, mo.height)
+                    && self.uv1[t] == before.uv1[t_old as usize]
+                    && self.layers == before.layers
+            }
+        };
+        (0..self.maps.len())
+            .into_par_iter()
+            .flat_map_iter(|i| {
+                let m = self.maps[i];
+                (0..self.layers).flat_map(move |layer| {
+                    (0..m.texels()).filter_map(move |k| {
+                        let t = self.owner[m.offset + k];
+                        // A buried texel's value is filled in from its neighbours: no
+                        // surface sees its light.
+                        let slot = layer * self.layer_texels + m.offset + k;
+                        if t == NO_INDEX || self.buried_slots.get(slot) == Some(&true) {
+                            return None;
+                        }
+                        let uv = self.sample_uv[m.offset + k];
+                        let front = layer == 0;
+                        let after = self.scale.unpack(self.texture_slice(layer, i)[k]);
+                        let t_old = triangle_map.get(t as usize).copied().unwrap_or(UNMAPPED);
+                        let old = if kept_layout(t as usize, t_old) {
+                            let io = before.triangle_instance[t_old as usize] as usize;
+                            before.scale.unpack(before.texture_slice(layer, io)[k])
+                        } else if t_old == UNMAPPED {
+                            Vec3::ZERO
+                        } else {
+                            before.lookup(t_old, uv, front)
+                        };
+                        // A texel passes on its whole change once it is beyond `share`.
+                        let change = if !(after - old).is_finite() {
+                            f32::INFINITY
+                        } else if difference_beyond(after, old, share).max_element() > 0.0 {
+                            (after - old).abs().max_element()
+                        } else {
+                            0.0
+                        };
+                        (change > 0.0).then(|| ChangePatch {
+                            triangle: t,
+                            side: if front { Side::Front } else { Side::Back },
+                            uv: Some(uv),
+                            area: texel_area(t),
+                            change,
+                        })
+                    })
+                })
+            })
+            .collect()
+    }
+}
+
+/// A box (min, max) around every triangle that an edit moved, added or removed: those of
+/// `new` without a counterpart in `old` (`triangle_map`) or with other corners, and those
+/// of `old` that no triangle of `new` maps to. `None` when none did.
+fn changed_region(
+    old: &TracedScene,
+    new: &TracedScene,
+    triangle_map: &[u32],
+) -> Option<(Vec3, Vec3)> {
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    let mut add = |corners: [Vec3; 3]| {
+        for p in corners {
+            (lo, hi) = (lo.min(p), hi.max(p));
+        }
+    };
+    let mut kept = vec![false; old.triangle_count()];
+    for (t, &corners) in new.positions().iter().enumerate() {
+        let t_old = triangle_map.get(t).copied().unwrap_or(UNMAPPED);
+        match old.positions().get(t_old as usize) {
+            Some(&before) => {
+                kept[t_old as usize] = true;
+                if before != corners {
+                    add(before);
+                    add(corners);
+                }
+            }
+            None => add(corners),
+        }
+    }
+    for (t_old, &corners) in old.positions().iter().enumerate() {
+        if !kept[t_old] {
+            add(corners);
+        }
+    }
+    (lo.x <= hi.x).then_some((lo, hi))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::LightmapSettings;
+    use surfcache_core::{glam::Affine3A, scenes::cornell};
+
+    /// A re-bake carries the probes of the texels an edit did not come near, and probes
+    /// the others again: together they must be exactly the probes of the edited scene.
+    #[test]
+    fn carried_probes_are_the_probes_of_the_edited_scene() {
+        let old_scene = cornell();
+        let mut new_scene = old_scene.clone();
+        for i in &mut new_scene.instances {
+            if i.name == "short_block" {
+                i.transform = Affine3A::from_translation(Vec3::new(0.1, 0.0, 0.0)) * i.transform;
+            }
+        }
+        let old = TracedScene::new(&old_scene).unwrap();
+        let new = TracedScene::new(&new_scene).unwrap();
+        let settings = LightmapSettings {
+            texels_per_metre: 16.0,
+            ..Default::default()
+        };
+        let mut before = Lightmaps::new(&old, settings);
+        before.probe_crossings(&old);
+        let identity: Vec<Option<u32>> = (0..new.instance_triangles().len() as u32)
+            .map(Some)
+            .collect();
+        let map = crate::triangle_map(&old, &new, &identity);
+        let mut carried = before.remapped(&old, &new, &map);
+        let mut fresh = carried.clone();
+        fresh.probed = None;
+        let stale = carried.probed.as_ref().unwrap().stale.clone();
+        let owned = |slot: &usize| carried.owner[slot % carried.layer_texels] != NO_INDEX;
+        let (kept, probed): (Vec<usize>, Vec<usize>) =
+            (0..stale.len()).filter(owned).partition(|&s| !stale[s]);
+        assert!(
+            !kept.is_empty() && !probed.is_empty(),
+            "{} kept, {} probed",
+            kept.len(),
+            probed.len()
+        );
+        carried.probe_crossings(&new);
+        fresh.probe_crossings(&new);
+        assert_eq!(carried.site_uv, fresh.site_uv);
+        assert_eq!(carried.exits, fresh.exits);
+        assert_eq!(carried.crossing_slot, fresh.crossing_slot);
+        assert_eq!(carried.crossing_lines, fresh.crossing_lines);
+        assert_eq!(carried.foot_sites, fresh.foot_sites);
+        // The short block's floor contact moved: some texel there crosses it afresh.
+        assert!(probed.iter().any(|&s| fresh.crossing_slot[s] != NO_INDEX));
     }
 }

@@ -139,12 +139,24 @@ impl Lightmaps {
             };
             let (layer, i) = (slot / self.layer_texels, slot % self.layer_texels);
             let texel = self.texel_point(scene, layer, i, 0, None);
-            // A re-bake keeps the foot's value where the crossing is the same.
+            // A re-bake keeps the foot's value where the crossing is the same; a foot
+            // that was buried (its line settled without one, `crossings::settle_feet`)
+            // stays buried unless the stage estimates it.
+            let line = self.crossing_lines[c as usize];
             let prior = self
                 .prior_feet
                 .get(&(slot as u32))
-                .filter(|(line, _)| *line == self.crossing_lines[c as usize])
-                .map(|&(_, foot)| Prior::Estimated(foot));
+                .and_then(|&(old, foot)| {
+                    if foot.is_nan() {
+                        let settled = crossings::SampleCrossing {
+                            foot: line.site,
+                            ..line
+                        };
+                        (settled == old).then_some(Prior::Filled(Vec3::ZERO))
+                    } else {
+                        (line == old).then_some(Prior::Estimated(foot))
+                    }
+                });
             points.push(SamplePoint {
                 site: SampleSite::Surface {
                     triangle: self.owner[i],
@@ -155,7 +167,8 @@ impl Lightmaps {
                 prior,
                 budget: foot_budget,
             });
-            self.foot_lines.push(c);
+            self.foot_lines
+                .push((c, matches!(prior, Some(Prior::Filled(_)))));
         }
     }
 
@@ -184,9 +197,13 @@ impl Lightmaps {
     /// Keeps the estimates of the round's feet (they follow its texels' points).
     pub(super) fn record_feet(&mut self, estimates: &[Estimate]) {
         let foot_estimates = &estimates[self.slots.len().min(estimates.len())..];
-        for (&line, e) in self.foot_lines.iter().zip(foot_estimates) {
+        for (&(line, buried), e) in self.foot_lines.iter().zip(foot_estimates) {
             self.foot_samples += e.samples as u64;
-            self.feet[line as usize] = crossings::foot_value(e);
+            self.feet[line as usize] = if buried && e.samples == 0 {
+                Vec3::NAN
+            } else {
+                crossings::foot_value(e)
+            };
         }
         self.foot_lines.clear();
     }
