@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{PI, square_projected_solid_angle};
+use common::{PI, square_cells, square_projected_solid_angle};
 use surfcache_cache::incremental::{ChangePatch, Influence, Side};
 use surfcache_core::{
     Environment, Instance, Material, Scene,
@@ -100,16 +100,9 @@ fn forward_rays_from_changed_texels_estimate_the_change_they_pass_on() {
         Environment::uniform(Vec3::ZERO),
     );
     let square_triangles = [2u32, 3];
-    let texels = 8;
-    let size = 0.5 / texels as f32;
-    let mut patches = Vec::new();
-    for i in 0..texels {
-        for j in 0..texels {
-            let p = Vec3::new(
-                -0.25 + (i as f32 + 0.5) * size,
-                2.0,
-                -0.25 + (j as f32 + 0.5) * size,
-            );
+    let (centres, size) = square_cells(8);
+    let patches: Vec<ChangePatch> = centres
+        .map(|p| {
             // The triangle of the square that holds the texel centre.
             let (triangle, uv) = square_triangles
                 .iter()
@@ -119,15 +112,15 @@ fn forward_rays_from_changed_texels_estimate_the_change_they_pass_on() {
                 })
                 .find(|(_, uv)| uv.min_element() >= 0.0 && uv.x + uv.y <= 1.0)
                 .unwrap();
-            patches.push(ChangePatch {
+            ChangePatch {
                 triangle,
                 side: Side::Front,
                 uv: Some(uv),
                 area: size * size,
                 change: 1.0,
-            });
-        }
-    }
+            }
+        })
+        .collect();
     let after = OnTriangles {
         triangles: square_triangles.to_vec(),
         after: 1.0,

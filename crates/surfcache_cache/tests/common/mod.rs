@@ -95,24 +95,32 @@ pub fn locate(scene: &TracedScene, x: Vec3, n: Vec3) -> (u32, Vec2, bool) {
     (p.triangle, p.uv, front)
 }
 
-/// `∫ cos θ_x dω` over the 0.5 m square 2 m above the origin (facing down), seen from
-/// floor point `x` (normal +Y): the midpoint rule on a 200 × 200 grid,
-/// `cos θ_x cos θ_p dA / r²` (both cosines are `d.y / r` here).
-pub fn square_projected_solid_angle(x: Vec3) -> f32 {
-    let n = 200;
+/// The centres of an `n` × `n` grid of cells over the 0.5 m square 2 m above the origin,
+/// and the cells' side.
+pub fn square_cells(n: u32) -> (impl Iterator<Item = Vec3>, f32) {
     let cell = 0.5 / n as f32;
-    let mut sum = 0.0;
-    for i in 0..n {
-        for j in 0..n {
-            let p = Vec3::new(
+    let centres = (0..n).flat_map(move |i| {
+        (0..n).map(move |j| {
+            Vec3::new(
                 -0.25 + (i as f32 + 0.5) * cell,
                 2.0,
                 -0.25 + (j as f32 + 0.5) * cell,
-            );
+            )
+        })
+    });
+    (centres, cell)
+}
+
+/// `∫ cos θ_x dω` over the 0.5 m square 2 m above the origin (facing down), seen from
+/// floor point `x` (normal +Y): the midpoint rule on a 200 × 200 grid
+/// ([`square_cells`]), `cos θ_x cos θ_p dA / r²` (both cosines are `d.y / r` here).
+pub fn square_projected_solid_angle(x: Vec3) -> f32 {
+    let (centres, cell) = square_cells(200);
+    centres
+        .map(|p| {
             let d = p - x;
             let r2 = d.length_squared();
-            sum += (d.y / r2.sqrt()).powi(2) * cell * cell / r2;
-        }
-    }
-    sum
+            (d.y / r2.sqrt()).powi(2) * cell * cell / r2
+        })
+        .sum()
 }
