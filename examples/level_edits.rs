@@ -104,36 +104,25 @@ fn edit_between(before: &Level, after: &Level, changed: &BTreeSet<String>) -> Ed
 /// Points a re-bake estimates per step (a batch).
 const BATCH: usize = 1 << 16;
 
-/// Re-bakes `before_bake` (of `before`) for `after`; the outcome and its seconds.
+/// Re-bakes `before_bake` (of `before`) for `after`: to completion, or superseded
+/// after one batch (`superseded`, no outcome); the outcome and its seconds.
 fn rebake(
     before: &Level,
     before_bake: &BakeOutcome,
     after: &Level,
     changed: &[&str],
-) -> (BakeOutcome, f64) {
+    superseded: bool,
+) -> (Option<BakeOutcome>, f64) {
     let changed = changed.iter().map(|s| s.to_string()).collect();
     let edit = edit_between(before, after, &changed);
     let start = Instant::now();
     let mut job = IncrementalJob::new(before_bake.clone(), before.traced.clone(), edit);
-    while !job.step(&after.traced, BATCH) {}
-    let outcome = job.into_outcome().expect("a finished re-bake");
+    let finished = job.step(&after.traced, BATCH);
+    if !superseded && !finished {
+        while !job.step(&after.traced, BATCH) {}
+    }
+    let outcome = (!superseded).then(|| job.into_outcome().expect("a finished re-bake"));
     (outcome, start.elapsed().as_secs_f64())
-}
-
-/// A re-bake of `before_bake` for `after` that is superseded after one batch; its
-/// seconds.
-fn abandoned_rebake(
-    before: &Level,
-    before_bake: &BakeOutcome,
-    after: &Level,
-    changed: &[&str],
-) -> f64 {
-    let changed = changed.iter().map(|s| s.to_string()).collect();
-    let edit = edit_between(before, after, &changed);
-    let start = Instant::now();
-    let mut job = IncrementalJob::new(before_bake.clone(), before.traced.clone(), edit);
-    job.step(&after.traced, BATCH);
-    start.elapsed().as_secs_f64()
 }
 
 /// Share of the published texels of `after` that differ from `before`'s texture of the
@@ -244,9 +233,9 @@ fn main() {
             let mut total = 0.0;
             for step in 1..10 {
                 let next = Level::new(moved(scene, VASE, Vec3::X * step as f32 * 0.1));
-                total += abandoned_rebake(&base_pair.0, &base_bake, &next, &changed);
+                total += rebake(&base_pair.0, &base_bake, &next, &changed, true).1;
             }
-            let (outcome, s) = rebake(&base_pair.0, &base_bake, &after, &changed);
+            let (outcome, s) = rebake(&base_pair.0, &base_bake, &after, &changed, false);
             (outcome, total + s)
         } else if name == "vase_dragged_slow" {
             // Ten steps of 10 cm, each from the re-bake before it.
@@ -254,13 +243,13 @@ fn main() {
             for step in 1..=10 {
                 let next = Level::new(moved(scene, VASE, Vec3::X * step as f32 * 0.1));
                 let from = level.as_ref().unwrap_or(&base_pair.0);
-                let (o, s) = rebake(from, &outcome, &next, &changed);
-                (outcome, total) = (o, total + s);
+                let (o, s) = rebake(from, &outcome, &next, &changed, false);
+                (outcome, total) = (o.expect("a finished re-bake"), total + s);
                 level = Some(next);
             }
-            (outcome, total)
+            (Some(outcome), total)
         } else {
-            rebake(&base_pair.0, &base_bake, &after, &changed)
+            rebake(&base_pair.0, &base_bake, &after, &changed, false)
         };
         // A drag ends where the move does: one bake from scratch serves both.
         let key = if name.starts_with("vase_dragged") {
@@ -276,7 +265,7 @@ fn main() {
             "vase_removed" => sponza::neighbourhood(&base_pair.0.traced, VASE),
             _ => sponza::neighbourhood(&after.traced, changed[0]),
         };
-        let incremental = rebaked.cache().clone();
+        let incremental = rebaked.expect("a finished re-bake").cache().clone();
         let err =
             sponza::compare_caches(&after.traced, &incremental, scratch.cache(), POINTS, None);
         let err_near = sponza::compare_caches(

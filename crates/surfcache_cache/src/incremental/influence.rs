@@ -101,8 +101,8 @@ pub struct Influence {
     /// Source triangles and their flux Σ |ΔL| · A (both sides).
     sources: (usize, f32),
     /// Why points were reached: on a changed triangle, near a shadow hit, by Q alone, by
-    /// Q + 2σ only; and points kept.
-    tally: [AtomicU64; 5],
+    /// Q + 2σ only; and points kept. Counted only for `SURFCACHE_TRACE_PASSES`.
+    tally: Option<[AtomicU64; 5]>,
 }
 
 /// One forward hit: where, the normal of the side it arrived at, its weight.
@@ -149,6 +149,20 @@ pub struct ChangePatch {
     pub change: f32,
 }
 
+impl ChangePatch {
+    /// Both sides of triangle `t` of `scene`, drawn uniformly over it.
+    pub fn whole_triangle(scene: &TracedScene, t: u32, change: f32) -> Self {
+        let [a, b, c] = scene.positions()[t as usize];
+        Self {
+            triangle: t,
+            side: Side::Both,
+            uv: None,
+            area: triangle_area(a, b, c),
+            change,
+        }
+    }
+}
+
 /// Source patches of a scene, drawn by weight × area.
 struct Sources<'a> {
     scene: &'a TracedScene,
@@ -191,16 +205,9 @@ impl<'a> Sources<'a> {
 
     /// Both sides of each of `triangles`, weight 1.
     fn triangles(scene: &'a TracedScene, triangles: &[u32]) -> Self {
-        let patches = triangles.iter().map(|&t| {
-            let [a, b, c] = scene.positions()[t as usize];
-            ChangePatch {
-                triangle: t,
-                side: Side::Both,
-                uv: None,
-                area: triangle_area(a, b, c),
-                change: 1.0,
-            }
-        });
+        let patches = triangles
+            .iter()
+            .map(|&t| ChangePatch::whole_triangle(scene, t, 1.0));
         Self::new(scene, patches, |_| 1.0)
     }
 
@@ -358,10 +365,14 @@ impl Influence {
             let albedo = scene.material_of(p.triangle).albedo.max_element().max(0.0);
             albedo / PI * p.change
         };
-        let matters = |p: &&ChangePatch| {
-            let most = PI * radiance(p);
-            most.is_nan() || most > negligible
-        };
+        let matters: Vec<ChangePatch> = changes
+            .iter()
+            .filter(|p| {
+                let most = PI * radiance(p);
+                most.is_nan() || most > negligible
+            })
+            .copied()
+            .collect();
         // A change that is not a number (an unbaked side) may be anything: whatever its
         // patches see is re-estimated.
         let known = |p: &ChangePatch| {
@@ -372,14 +383,8 @@ impl Influence {
             if radiance(p).is_finite() { 0.0 } else { 1.0 }
         };
         let sets = [
-            (
-                Sources::new(scene, changes.iter().filter(matters).copied(), known),
-                false,
-            ),
-            (
-                Sources::new(scene, changes.iter().filter(matters).copied(), unknown),
-                true,
-            ),
+            (Sources::new(scene, matters.iter().copied(), known), false),
+            (Sources::new(scene, matters.iter().copied(), unknown), true),
         ];
         let stream = splitmix64(seed ^ 0x696e_6469_7265_6374);
         let mut hits = Vec::new();
@@ -488,13 +493,16 @@ impl Influence {
             changed,
             rays,
             sources,
-            tally: Default::default(),
+            tally: std::env::var_os(crate::bake::TRACE_PASSES_VAR).map(|_| Default::default()),
         }
     }
 
     /// What the influence found and decided so far, for `SURFCACHE_TRACE_PASSES`.
     pub fn report(&self) -> String {
-        let t: Vec<u64> = self.tally.iter().map(|c| c.load(Relaxed)).collect();
+        let t: Vec<u64> = match &self.tally {
+            Some(tally) => tally.iter().map(|c| c.load(Relaxed)).collect(),
+            None => vec![0; 5],
+        };
         format!(
             "sources {} flux {:.4} rays {} radius {:.3} hits {} | reached: changed {} shadow {} q {} sigma {} | kept {}",
             self.sources.0,
@@ -519,12 +527,17 @@ impl Influence {
     /// scene may exceed `allowance` (W/m²): on a changed triangle, or where
     /// `Q + 2σ_Q > allowance` ([`Self::change_at`]).
     pub fn reaches(&self, triangle: u32, x: Vec3, n: Vec3, allowance: f32) -> bool {
+        let count = |k: usize| {
+            if let Some(tally) = &self.tally {
+                tally[k].fetch_add(1, Relaxed);
+            }
+        };
         if self.changed.get(triangle as usize) == Some(&true) {
-            self.tally[0].fetch_add(1, Relaxed);
+            count(0);
             return true;
         }
         let (q, sigma) = self.change_at(x, n);
-        let k = if q == f32::INFINITY {
+        count(if q == f32::INFINITY {
             1
         } else if q > allowance {
             2
@@ -532,8 +545,7 @@ impl Influence {
             3
         } else {
             4
-        };
-        self.tally[k].fetch_add(1, Relaxed);
+        });
         q + 2.0 * sigma > allowance
     }
 

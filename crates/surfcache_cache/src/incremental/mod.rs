@@ -443,16 +443,7 @@ pub fn change_patches(
     }
     (0..changes.len() as u32)
         .filter(|&t| changes[t as usize] > 0.0 || changes[t as usize].is_nan())
-        .map(|t| {
-            let [a, b, c] = scene.positions()[t as usize];
-            ChangePatch {
-                triangle: t,
-                side: Side::Both,
-                uv: None,
-                area: surfcache_core::geometry::triangle_area(a, b, c),
-                change: changes[t as usize],
-            }
-        })
+        .map(|t| ChangePatch::whole_triangle(scene, t, changes[t as usize]))
         .collect()
 }
 

@@ -125,7 +125,10 @@ impl Lightmaps {
         self.buried_slots = state.iter().map(|&st| st == Burial::Buried).collect();
         stats.dilated_texels += self.fill_textures(&mut values, &mut state);
         self.pack(&values);
-        stats.sample_points += self.foot_sites.iter().flatten().count() as u64;
+        stats.sample_points +=
+            self.probed
+                .as_deref()
+                .map_or(0, |p| p.foot_sites.iter().flatten().count()) as u64;
         stats.samples += self.foot_samples;
         // UV1: three f32 pairs per triangle corner (a generated layout needs a vertex per
         // corner); the per-triangle instance index is the engine's mesh binding.
@@ -162,8 +165,6 @@ impl Lightmaps {
         self.guide = Vec::new();
         self.pending = Vec::new();
         self.site_uv = Vec::new();
-        self.exits = Vec::new();
-        self.foot_sites = Vec::new();
         self.feet = Vec::new();
         self.guides = TexelGuides::default();
     }

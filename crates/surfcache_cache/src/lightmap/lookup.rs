@@ -36,20 +36,18 @@ impl Lightmaps {
         // A re-bake carries the probes of slots that no changed surface came near
         // ([`Probed::stale`]).
         let carried = self.probed.take().filter(|p| p.site_uv.len() == total);
-        let keeps = |slot: usize| {
-            carried
-                .as_deref()
-                .is_some_and(|p| !p.stale.get(slot).copied().unwrap_or(false))
-        };
-        let probes: Vec<Option<(Vec2, Probe)>> = (0..total)
+        // Per slot: a fresh probe (site, probe), or the probes it is carried from.
+        let probes: Vec<Result<(Vec2, Probe), &Probed>> = (0..total)
             .into_par_iter()
             .map(|slot| {
-                if keeps(slot) {
-                    return None;
+                if let Some(p) = carried.as_deref()
+                    && !p.stale.get(slot).copied().unwrap_or(false)
+                {
+                    return Err(p);
                 }
                 let (layer, i) = (slot / self.layer_texels, slot % self.layer_texels);
                 let uv = self.sample_uv[i];
-                Some(match self.owner[i] {
+                Ok(match self.owner[i] {
                     NO_INDEX => (uv, Probe::default()),
                     t => {
                         let m = &self.maps[self.triangle_instance[t as usize] as usize];
@@ -84,8 +82,8 @@ impl Lightmaps {
             ..Default::default()
         };
         for (slot, probe) in probes.into_iter().enumerate() {
-            let crossing = match (probe, carried.as_deref()) {
-                (Some((uv, probe)), _) => {
+            let crossing = match probe {
+                Ok((uv, probe)) => {
                     found.site_uv.push(uv);
                     found.exits.push(probe.exit);
                     probe.crossing.and_then(|line| {
@@ -95,18 +93,12 @@ impl Lightmaps {
                         crossings::SampleCrossing::new(scene, t, front, &line, corners, uv)
                     })
                 }
-                (None, Some(p)) => {
+                Err(p) => {
                     found.site_uv.push(p.site_uv[slot]);
                     found.exits.push(p.exits[slot]);
                     let c = p.crossing_slot[slot];
                     (c != NO_INDEX)
                         .then(|| (p.crossing_lines[c as usize], p.foot_sites[c as usize]))
-                }
-                // (Not reached: a slot is carried only when there are probes to carry.)
-                (None, None) => {
-                    found.site_uv.push(self.sample_uv[slot % self.layer_texels]);
-                    found.exits.push(None);
-                    None
                 }
             };
             if let Some((line, foot)) = crossing {
@@ -115,11 +107,11 @@ impl Lightmaps {
                 found.foot_sites.push(foot);
             }
         }
+        // What baking changes (a moved site, settled lines) is copied out; exits and
+        // feet are read from the probes themselves.
         self.site_uv = found.site_uv.clone();
-        self.exits = found.exits.clone();
         self.crossing_slot = found.crossing_slot.clone();
         self.crossing_lines = found.crossing_lines.clone();
-        self.foot_sites = found.foot_sites.clone();
         self.probed = Some(std::sync::Arc::new(found));
     }
 }

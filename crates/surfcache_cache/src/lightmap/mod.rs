@@ -201,11 +201,9 @@ pub struct Lightmaps {
     #[serde(skip)]
     guide: Vec<(Vec3, Vec3)>,
     /// Where each slot is estimated (barycentrics on its owner; a buried texel moves to
-    /// the visible part of its footprint, [`crossings`]), and the exit its probe found.
+    /// the visible part of its footprint, [`crossings`]: the exit its probe found).
     #[serde(skip)]
     site_uv: Vec<Vec2>,
-    #[serde(skip)]
-    exits: Vec<Option<Vec2>>,
     /// Per slot: index into `crossing_lines` of the crossing that cuts its footprint, or
     /// [`NO_INDEX`]; lookups leave out texels whose crossing separates them from the point
     /// looked up (module docs, Crossings).
@@ -218,10 +216,8 @@ pub struct Lightmaps {
     /// E at each crossing line's foot (zero where it has none).
     #[serde(default)]
     crossing_feet: Vec<StoredRgb>,
-    /// While baking: each line's foot (barycentrics on the texel's owner), if it has one,
-    /// and its estimate (NaN: none yet, or buried).
-    #[serde(skip)]
-    foot_sites: Vec<Option<Vec2>>,
+    /// While baking: each line's foot estimate (NaN: none yet, or buried); where the
+    /// feet lie is in [`Probed::foot_sites`].
     #[serde(skip)]
     feet: Vec<Vec3>,
     /// The line of each foot point of the current round (after its texel points), and
@@ -234,8 +230,8 @@ pub struct Lightmaps {
     /// While baking: every round's records and the guides of the next round.
     #[serde(skip)]
     guides: TexelGuides,
-    /// What [`Self::probe_crossings`] found over the scene this cache was laid out over,
-    /// kept for re-bakes ([`Probed`]).
+    /// What [`Self::probe_crossings`] found over the scene this cache was laid out over
+    /// (exits and feet are read from it while baking), kept for re-bakes ([`Probed`]).
     #[serde(skip)]
     probed: Option<std::sync::Arc<Probed>>,
     emitted: bool,

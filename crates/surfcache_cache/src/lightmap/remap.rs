@@ -96,6 +96,20 @@ impl Lightmaps {
         fresh.probed = self.carried_probes(&fresh, &reused, old, new, triangle_map);
         fresh
     }
+    /// Whether triangle `t` has the texels that `t_old` had in `before` (same texture
+    /// size, same UV1, same layers): its texels then compare one to one.
+    fn kept_layout(&self, before: &Lightmaps, t: usize, t_old: u32) -> bool {
+        t_old != UNMAPPED && {
+            let (m, mo) = (
+                &self.maps[self.triangle_instance[t] as usize],
+                &before.maps[before.triangle_instance[t_old as usize] as usize],
+            );
+            (m.width, m.height) == (mo.width, mo.height)
+                && self.uv1[t] == before.uv1[t_old as usize]
+                && self.layers == before.layers
+        }
+    }
+
     /// Per triangle (of the scene `self` was laid out over): the largest change, in any
     /// channel and layer, of the texels a lookup on it can read (its UV1 box plus the
     /// bilinear footprint), against `before` looked up on `triangle_map[t]`, leaving out
@@ -110,16 +124,7 @@ impl Lightmaps {
         (0..self.triangle_instance.len())
             .map(|t| {
                 let t_old = triangle_map.get(t).copied().unwrap_or(UNMAPPED);
-                let same_layout = t_old != UNMAPPED && {
-                    let (i, io) = (
-                        self.triangle_instance[t] as usize,
-                        before.triangle_instance[t_old as usize] as usize,
-                    );
-                    let (m, mo) = (&self.maps[i], &before.maps[io]);
-                    (m.width, m.height) == (mo.width, mo.height)
-                        && self.uv1[t] == before.uv1[t_old as usize]
-                        && self.layers == before.layers
-                };
+                let same_layout = self.kept_layout(before, t, t_old);
                 let mut change = 0.0f32;
                 for layer in 0..self.layers {
                     let after = self.footprint(layer, t as u32);
@@ -245,17 +250,6 @@ impl Lightmaps {
             let texels = 0.5 * ((q - p).perp_dot(r - p)).abs() * (m.width as f32 * m.height as f32);
             triangle_area(a, b, c) / texels.max(f32::MIN_POSITIVE)
         };
-        let kept_layout = |t: usize, t_old: u32| {
-            t_old != UNMAPPED && {
-                let (m, mo) = (
-                    &self.maps[self.triangle_instance[t] as usize],
-                    &before.maps[before.triangle_instance[t_old as usize] as usize],
-                );
-                (m.width, m.height) == (mo.width, mo.height)
-                    && self.uv1[t] == before.uv1[t_old as usize]
-                    && self.layers == before.layers
-            }
-        };
         (0..self.maps.len())
             .into_par_iter()
             .flat_map_iter(|i| {
@@ -273,7 +267,7 @@ impl Lightmaps {
                         let front = layer == 0;
                         let after = self.scale.unpack(self.texture_slice(layer, i)[k]);
                         let t_old = triangle_map.get(t as usize).copied().unwrap_or(UNMAPPED);
-                        let old = if kept_layout(t as usize, t_old) {
+                        let old = if self.kept_layout(before, t as usize, t_old) {
                             let io = before.triangle_instance[t_old as usize] as usize;
                             before.scale.unpack(before.texture_slice(layer, io)[k])
                         } else if t_old == UNMAPPED {
@@ -384,10 +378,11 @@ mod tests {
         carried.probe_crossings(&new);
         fresh.probe_crossings(&new);
         assert_eq!(carried.site_uv, fresh.site_uv);
-        assert_eq!(carried.exits, fresh.exits);
+        let (c, f) = (carried.probed.unwrap(), fresh.probed.unwrap());
+        assert_eq!(c.exits, f.exits);
         assert_eq!(carried.crossing_slot, fresh.crossing_slot);
         assert_eq!(carried.crossing_lines, fresh.crossing_lines);
-        assert_eq!(carried.foot_sites, fresh.foot_sites);
+        assert_eq!(c.foot_sites, f.foot_sites);
         // The short block's floor contact moved: some texel there crosses it afresh.
         assert!(probed.iter().any(|&s| fresh.crossing_slot[s] != NO_INDEX));
     }

@@ -134,7 +134,11 @@ impl Lightmaps {
         self.feet = vec![Vec3::NAN; self.crossing_lines.len()];
         self.foot_lines.clear();
         for (slot, &c) in self.crossing_slot.iter().enumerate() {
-            let Some(foot) = self.foot_sites.get(c as usize).copied().flatten() else {
+            let foot_site = self
+                .probed
+                .as_deref()
+                .and_then(|p| p.foot_sites.get(c as usize));
+            let Some(foot) = foot_site.copied().flatten() else {
                 continue;
             };
             let (layer, i) = (slot / self.layer_texels, slot % self.layer_texels);
@@ -227,7 +231,10 @@ impl Lightmaps {
                 let kept_buried =
                     e.samples == 0 && matches!(self.priors.get(slot), Some(Some(Prior::Filled(_))));
                 let buried = e.back_face_share > self.settings.buried_threshold || kept_buried;
-                let exit = self.exits.get(slot).copied().flatten();
+                let exit = self
+                    .probed
+                    .as_deref()
+                    .and_then(|p| p.exits.get(slot).copied().flatten());
                 self.state[slot] = match (buried, exit, self.state[slot]) {
                     (false, _, _) => Burial::Valid,
                     // Inside a solid, with a visible part of the footprint beyond the
