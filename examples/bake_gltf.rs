@@ -15,7 +15,7 @@ use bevy_ecs::prelude::*;
 use std::{path::Path, time::Duration};
 use surfcache::{
     core::Environment,
-    ecs::{BakeConfig, BakeStatus, InstanceName, PublishedLightmaps, SurfcachePlugin, spawn_scene},
+    ecs::{BakeConfig, BakeStatus, BakedLightmap, InstanceName, SurfcachePlugin, spawn_scene},
     io::{load_scene, read_environment_map, write_rgb_exr},
 };
 
@@ -60,16 +60,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     let out = Path::new("out/bake_gltf");
     std::fs::create_dir_all(out)?;
-    let names: Vec<(Entity, String)> = world
-        .query::<(Entity, &InstanceName)>()
+    // Every baked mesh entity carries its textures as a `BakedLightmap` component.
+    for (name, lightmap) in world
+        .query::<(&InstanceName, &BakedLightmap)>()
         .iter(&world)
-        .map(|(e, n)| (e, n.0.clone()))
-        .collect();
-    let lightmaps = world.resource::<PublishedLightmaps>();
-    for (entity, name) in names {
-        let Some(lightmap) = lightmaps.by_entity.get(&entity) else {
-            continue;
-        };
+    {
+        let name = &name.0;
         for (side, texture) in [("", &lightmap.front), ("_back", &lightmap.back)] {
             let Some(t) = texture else { continue };
             let path = out.join(format!("{name}{side}.exr"));

@@ -20,8 +20,8 @@ use surfcache::{
         scenes::{cuboid, quad},
     },
     ecs::{
-        BakeConfig, EnvironmentLight, InstanceName, MeshGeometry, PublishedLightmaps,
-        PunctualLight, SurfaceMaterial, SurfcachePlugin, WorldTransform,
+        BakeConfig, BakedLightmap, EnvironmentLight, InstanceName, MeshGeometry, PunctualLight,
+        SurfaceMaterial, SurfcachePlugin, WorldTransform,
     },
 };
 
@@ -96,12 +96,10 @@ fn main() {
     .expect("the bake finishes");
     println!("baked in {:.2} s", done.seconds);
 
-    let lightmaps = world.resource::<PublishedLightmaps>();
+    // Every baked mesh entity now carries its textures as a `BakedLightmap` component.
+    let lightmap = |entity: Entity| world.get::<BakedLightmap>(entity).expect("baked");
     for (name, entity) in [("floor", floor), ("box", block)] {
-        let front = lightmaps.by_entity[&entity]
-            .front
-            .as_ref()
-            .expect("front side");
+        let front = lightmap(entity).front.as_ref().expect("front side");
         println!(
             "{name}: {}x{} texels, UV rectangle {:?}, {} triangles addressed by UV1",
             front.width,
@@ -111,7 +109,7 @@ fn main() {
         );
     }
     // A floor corner is 1.75 m from the box: only the sky and the sun light it.
-    let floor_texture = lightmaps.by_entity[&floor].front.as_ref().unwrap();
+    let floor_texture = lightmap(floor).front.as_ref().unwrap();
     let corner = floor_texture.texels[floor_texture.width as usize + 1];
     let expected = PI * sky + sun * (-sun_direction).dot(Vec3::Y);
     println!("floor corner: E = {corner:.3}, closed form π·L + E_sun·cos θ = {expected:.3}");

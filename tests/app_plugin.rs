@@ -12,7 +12,7 @@ use std::{
 use surfcache::{
     cache::{CacheSettings, LightmapSettings, bake::BakeSettings},
     core::{Environment, Material, Scene, scenes::square},
-    ecs::{BakeConfig, BakeFinished, PublishedLightmaps, SurfcachePlugin, spawn_scene},
+    ecs::{BakeConfig, BakeFinished, BakedLightmap, SurfcachePlugin, spawn_scene},
     trace::EstimatorSettings,
 };
 
@@ -69,11 +69,8 @@ fn app_plugin_bakes_a_floor_under_a_uniform_sky() {
     };
     assert!(!finished.incremental);
 
-    let published = app.world().resource::<PublishedLightmaps>();
-    let front = published.by_entity[&entities[0]]
-        .front
-        .as_ref()
-        .expect("the floor's front texture");
+    let floor = app.world().get::<BakedLightmap>(entities[0]).unwrap();
+    let front = floor.front.as_ref().expect("the floor's front texture");
     let expected = PI * radiance;
     let mut lit = 0;
     for texel in &front.texels {

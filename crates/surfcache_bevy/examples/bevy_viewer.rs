@@ -37,7 +37,7 @@ use surfcache_bevy::{
     view::{CaptureWhenBaked, capture_when_baked, ev100_for_exposure, matched_camera},
 };
 use surfcache_core::scenes;
-use surfcache_ecs::PublishedLightmaps;
+use surfcache_ecs::{BakedLightmap, BakedSurfaceCache};
 
 /// What to show, from the command line.
 #[derive(Resource, Clone, Debug)]
@@ -377,15 +377,15 @@ fn setup(mut spawner: SceneSpawner, assets: Res<AssetServer>, mut viewer: ResMut
 /// radiance on a mid-grey surface (albedo 0.5) as the picture's.
 fn auto_exposure(
     mut viewer: ResMut<Viewer>,
-    published: Res<PublishedLightmaps>,
+    baked: Res<BakedSurfaceCache>,
+    lightmaps: Query<&BakedLightmap>,
     mut cameras: Query<&mut Exposure>,
 ) {
-    if viewer.exposure.is_some() || published.generation == 0 {
+    if viewer.exposure.is_some() || baked.generation == 0 {
         return;
     }
-    let radiance: Vec<glam::Vec3> = published
-        .by_entity
-        .values()
+    let radiance: Vec<glam::Vec3> = lightmaps
+        .iter()
         .filter_map(|l| l.front.as_ref())
         .flat_map(|t| t.texels.iter().map(|e| *e * (0.5 / std::f32::consts::PI)))
         .collect();

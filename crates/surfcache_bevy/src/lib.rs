@@ -14,7 +14,7 @@
 //!   ▼
 //! surfcache_ecs components ─► BVH build ─► (incremental) bake in the background
 //!   │                                      (BakeStatus: progress)
-//!   ▼ PublishedLightmaps
+//!   ▼ BakedLightmap (a component on each baked mesh entity)
 //! lightmap: Image (E/π, Rgba16Float, updated in place) + Lightmap + ATTRIBUTE_UV_1 mesh
 //! ```
 //!

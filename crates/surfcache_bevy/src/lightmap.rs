@@ -27,7 +27,7 @@ use bevy::{
 };
 use half::f16;
 use surfcache_cache::IrradianceTexture;
-use surfcache_ecs::PublishedLightmaps;
+use surfcache_ecs::BakedLightmap;
 
 /// Bevy lightmap texel per unit of irradiance E (W/m²): 1/π (module docs).
 pub const LIGHTMAP_SCALE: f32 = core::f32::consts::FRAC_1_PI;
@@ -66,7 +66,7 @@ pub struct LightmappedMesh {
     pub uv1_mesh: Option<Handle<Mesh>>,
     /// The lightmap image (also in the entity's [`Lightmap`]).
     pub image: Handle<Image>,
-    /// [`surfcache_ecs::EntityLightmap::version`] of the texture shown.
+    /// [`BakedLightmap::version`] of the texture shown.
     pub version: u64,
 }
 
@@ -81,39 +81,36 @@ impl LightmappedMesh {
     }
 }
 
-/// Publishing into Bevy: after each published bake, writes the changed entities' texels
-/// into their lightmap images (in place), gives new ones an image, a [`Lightmap`] and the
-/// UV1 their layout needs, and takes them away from entities that left the bake.
+/// Publishing into Bevy: writes the texels of every entity whose [`BakedLightmap`] a bake
+/// changed into its lightmap image (in place), gives newly baked entities an image, a
+/// [`Lightmap`] and the UV1 their layout needs, and takes them away from entities that
+/// left the bake.
 pub fn apply_lightmaps(
     mut commands: Commands,
-    published: Res<PublishedLightmaps>,
     mut images: ResMut<Assets<Image>>,
     mut meshes: ResMut<Assets<Mesh>>,
-    mut entities: Query<(Entity, &mut Mesh3d, Option<&mut LightmappedMesh>)>,
+    mut baked: Query<(
+        Entity,
+        &mut Mesh3d,
+        Ref<BakedLightmap>,
+        Option<&mut LightmappedMesh>,
+    )>,
+    mut left: Query<(Entity, &mut Mesh3d, &LightmappedMesh), Without<BakedLightmap>>,
 ) {
-    if !published.is_changed() {
-        return;
+    for (entity, mut drawn, state) in &mut left {
+        unlight(&mut commands, entity, &mut drawn, state);
     }
-    for (entity, mut drawn, mut state) in &mut entities {
-        let Some(texture) = published
-            .by_entity
-            .get(&entity)
-            .and_then(|l| l.front.as_ref().map(|t| (t, l.version)))
-        else {
+    for (entity, mut drawn, lightmap, mut state) in &mut baked {
+        let version = lightmap.version;
+        if !lightmap.is_changed() || state.as_ref().is_some_and(|s| s.version == version) {
+            continue;
+        }
+        let Some(texture) = lightmap.front.as_ref() else {
             if let Some(state) = state {
-                if state.uv1_mesh.as_ref() == Some(&drawn.0) {
-                    drawn.0 = state.source.clone();
-                }
-                commands
-                    .entity(entity)
-                    .remove::<(Lightmap, LightmappedMesh)>();
+                unlight(&mut commands, entity, &mut drawn, &state);
             }
             continue;
         };
-        let (texture, version) = texture;
-        if state.as_ref().is_some_and(|s| s.version == version) {
-            continue;
-        }
         let source = LightmappedMesh::source_of(state.as_deref(), &drawn.0);
         let Some(source_mesh) = meshes.get(&source) else {
             continue;
@@ -175,6 +172,16 @@ pub fn apply_lightmaps(
             }
         }
     }
+}
+
+/// Takes an entity's lightmap away and draws its own mesh again.
+fn unlight(commands: &mut Commands, entity: Entity, drawn: &mut Mesh3d, state: &LightmappedMesh) {
+    if state.uv1_mesh.as_ref() == Some(&drawn.0) {
+        drawn.0 = state.source.clone();
+    }
+    commands
+        .entity(entity)
+        .remove::<(Lightmap, LightmappedMesh)>();
 }
 
 /// The [`Lightmap`] of a whole image (surfcache's textures are one per entity).

@@ -14,7 +14,7 @@ use bevy::{
     render::view::screenshot::{Screenshot, ScreenshotCaptured},
 };
 use std::sync::{Arc, Mutex};
-use surfcache_ecs::PublishedLightmaps;
+use surfcache_ecs::BakedSurfaceCache;
 
 /// The `Exposure::ev100` under which a Bevy camera scales radiance by `exposure`.
 pub fn ev100_for_exposure(exposure: f32) -> f32 {
@@ -76,14 +76,14 @@ impl CaptureWhenBaked {
 pub fn capture_when_baked(
     mut commands: Commands,
     mut capture: ResMut<CaptureWhenBaked>,
-    published: Res<PublishedLightmaps>,
+    baked: Res<BakedSurfaceCache>,
     mut exit: MessageWriter<AppExit>,
 ) {
     if capture.picture.lock().map(|p| p.is_some()).unwrap_or(true) {
         exit.write(AppExit::Success);
         return;
     }
-    if published.generation == 0 {
+    if baked.generation == 0 {
         return;
     }
     capture.countdown -= 1;

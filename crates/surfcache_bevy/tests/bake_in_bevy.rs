@@ -15,7 +15,7 @@ use surfcache_bevy::{
 };
 use surfcache_cache::{CacheSettings, LightmapSettings, bake::BakeSettings};
 use surfcache_core::{Environment, Instance, Material, Scene, scenes};
-use surfcache_ecs::{PublishedLightmaps, PunctualLight};
+use surfcache_ecs::{BakedLightmap, PunctualLight};
 use surfcache_trace::EstimatorSettings;
 
 /// A coarse, quick bake: 12 texels per metre, a 3 % bound, full paths.
@@ -114,7 +114,6 @@ fn a_bevy_scene_bakes_into_lightmaps_and_rebakes_a_moved_mesh_in_place() {
     let first = until_baked(&mut app, 0);
     assert!(!first.incremental);
     let world = app.world_mut();
-    let published = world.resource::<PublishedLightmaps>().clone();
     let mut images_before = Vec::new();
     for &entity in &entities {
         let e = world.entity(entity);
@@ -123,7 +122,7 @@ fn a_bevy_scene_bakes_into_lightmaps_and_rebakes_a_moved_mesh_in_place() {
             .expect("every mesh is lightmapped");
         let lightmap = e.get::<Lightmap>().expect("and has a Lightmap");
         assert_eq!(lightmap.image, state.image);
-        let texture = published.by_entity[&entity].front.clone().unwrap();
+        let texture = e.get::<BakedLightmap>().unwrap().front.clone().unwrap();
         // The drawn mesh carries the bake's layout in UV1 (the built-in meshes have none
         // of their own, so it is the plugin's copy).
         let drawn = &e.get::<Mesh3d>().unwrap().0;
@@ -197,7 +196,9 @@ fn a_floor_under_a_uniform_sky_has_texels_of_the_sky_radiance() {
     let world = app.world();
     let state = world.entity(floor).get::<LightmappedMesh>().unwrap();
     let image = world.resource::<Assets<Image>>().get(&state.image).unwrap();
-    let texture = world.resource::<PublishedLightmaps>().by_entity[&floor]
+    let texture = world
+        .get::<BakedLightmap>(floor)
+        .unwrap()
         .front
         .clone()
         .unwrap();

@@ -14,7 +14,7 @@ use surfcache_trace::{EstimatorSettings, Sampler};
 
 use crate::scene_args::LoadedWorld;
 use surfcache_ecs::{
-    BakeConfig, BakeStatus, BakeWaitError, BakedSurfaceCache, PublishedLightmaps, SurfcachePlugin,
+    BakeConfig, BakeStatus, BakeWaitError, BakedLightmap, BakedSurfaceCache, SurfcachePlugin,
 };
 
 /// Parses a method name, listing the known ones on error.
@@ -317,9 +317,8 @@ pub fn bake(
                 .context("internal error: the bake did not finish")?;
             let mut textures: Vec<IrradianceTexture> = loaded
                 .world
-                .resource::<PublishedLightmaps>()
-                .by_entity
-                .values()
+                .query::<&BakedLightmap>()
+                .iter(&loaded.world)
                 .flat_map(|l| l.front.iter().chain(l.back.iter()))
                 .map(|t| (**t).clone())
                 .collect();

@@ -43,7 +43,7 @@
 
 use crate::{
     bvh::TracedSceneState,
-    publish::{PendingPublish, PublishedLightmaps},
+    publish::{EntityTextures, PendingPublish},
     scene_sync::SceneChanges,
 };
 use bevy_ecs::prelude::*;
@@ -180,7 +180,7 @@ struct Baseline {
     scene: Arc<TracedScene>,
     entities: Vec<Entity>,
     outcome: BakeOutcome,
-    published: Arc<PublishedLightmaps>,
+    published: Arc<EntityTextures>,
     /// The settings the bake was asked for ([`BakeConfig::settings`]); the outcome's
     /// differ where the bake fitted them to the scene (density budget, floor).
     requested: BakeSettings,
@@ -195,7 +195,7 @@ pub(crate) struct BakeResult {
     pub scene: Arc<TracedScene>,
     pub entities: Vec<Entity>,
     pub outcome: BakeOutcome,
-    pub published: Arc<PublishedLightmaps>,
+    pub published: Arc<EntityTextures>,
     /// The settings the bake was asked for.
     pub requested: BakeSettings,
 }
@@ -210,7 +210,7 @@ struct Run {
     id: u64,
     generation: u64,
     incremental: bool,
-    previous: Option<Arc<PublishedLightmaps>>,
+    previous: Option<Arc<EntityTextures>>,
     started: Instant,
 }
 
@@ -222,7 +222,7 @@ impl Run {
             .into_outcome()
             .ok_or("internal error: the bake did not finish")?;
         let textures = outcome.cache().publish(&self.scene);
-        let published = PublishedLightmaps::from_textures(
+        let published = EntityTextures::from_textures(
             textures,
             &self.entities,
             self.generation,

@@ -5,8 +5,8 @@
 //! the sky is an entity with [`EnvironmentLight`]. [`SurfcachePlugin::build`] registers the
 //! systems in the ordered sets of [`SurfcacheSystems`]: scene sync → BVH build →
 //! invalidation → bake step → publish. The BVH build and the bake run in the background;
-//! the finished surface cache lands in [`BakedSurfaceCache`], its textures per entity in
-//! [`PublishedLightmaps`], and a [`BakeFinished`] message says so. Edits re-bake
+//! the finished surface cache lands in [`BakedSurfaceCache`], each mesh entity's textures
+//! in its [`BakedLightmap`] component, and a [`BakeFinished`] message says so. Edits re-bake
 //! incrementally ([`baking`] documents the policy). Systems are thin: they move data
 //! between components, resources and the ECS-free math of the other crates.
 //!
@@ -17,14 +17,14 @@
 //!   ([`TracedSceneState`]).
 //! - [`baking`]: bake settings ([`BakeConfig`]), progress ([`BakeStatus`]), the baseline
 //!   and the bake in flight ([`Baking`]), and the finished cache ([`BakedSurfaceCache`]).
-//! - [`publish`]: the textures per entity ([`PublishedLightmaps`]) and the
+//! - [`publish`]: the textures on each entity ([`BakedLightmap`]) and the
 //!   [`BakeFinished`] message.
 //! - [`plugin`]: registration ([`SurfcachePlugin`], [`SurfcacheSystems`]).
 //!
 //! ```
 //! use bevy_ecs::prelude::*;
 //! use surfcache_core::scenes;
-//! use surfcache_ecs::{BakeConfig, PublishedLightmaps, SurfcachePlugin, spawn_scene};
+//! use surfcache_ecs::{BakeConfig, BakedLightmap, SurfcachePlugin, spawn_scene};
 //!
 //! let mut world = World::new();
 //! let mut schedule = Schedule::default();
@@ -44,8 +44,7 @@
 //! let baked = SurfcachePlugin::run_until_baked(&mut world, &mut schedule, pause, |_| true)
 //!     .unwrap();
 //! assert!(!baked.incremental);
-//! let lightmaps = world.resource::<PublishedLightmaps>();
-//! let floor = &lightmaps.by_entity[&entities[0]];
+//! let floor = world.get::<BakedLightmap>(entities[0]).unwrap();
 //! assert!(floor.front.as_ref().unwrap().texels.iter().all(|e| e.is_finite()));
 //! ```
 
@@ -62,5 +61,5 @@ pub use components::{
     EnvironmentLight, InstanceName, MeshGeometry, PunctualLight, SurfaceMaterial, WorldTransform,
 };
 pub use plugin::{BakeWaitError, SurfcachePlugin, SurfcacheSystems, spawn_scene};
-pub use publish::{BakeFinished, EntityLightmap, PublishedLightmaps};
+pub use publish::{BakeFinished, BakedLightmap};
 pub use scene_sync::SceneChanges;

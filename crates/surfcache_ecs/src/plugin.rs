@@ -69,7 +69,6 @@ impl SurfcachePlugin {
         world.init_resource::<BakeStatus>();
         world.init_resource::<PendingPublish>();
         world.init_resource::<BakedSurfaceCache>();
-        world.init_resource::<PublishedLightmaps>();
     }
 
     /// The systems, in [`SurfcacheSystems`] order (messages are advanced by the caller).

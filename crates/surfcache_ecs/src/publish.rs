@@ -1,24 +1,40 @@
-//! Publishing: the finished bake's irradiance textures per entity, as a resource.
+//! Publishing: the finished bake's irradiance textures on the mesh entities they belong to.
 //!
-//! This module owns [`PublishedLightmaps`], the [`BakeFinished`] message and the
+//! This module owns the [`BakedLightmap`] component, the [`BakeFinished`] message and the
 //! [`PendingPublish`] slot that [`publish`] empties into them and into
 //! [`BakedSurfaceCache`].
 //!
-//! [`PublishedLightmaps`] holds, for every mesh entity, linear-RGB irradiance textures
-//! (W/m²) with the UV1 coordinates and UV rectangle that address them — what Bevy's
-//! `Lightmap` takes (image, `uv_rect`, the mesh's UV_1). It changes (Bevy change
-//! detection) only when a bake finishes, all at once: it never mixes textures of two
-//! scene generations. An entity's [`EntityLightmap::version`] is the generation at which
-//! its textures last changed, so consumers re-upload only those.
+//! Every mesh entity a published bake covers carries a [`BakedLightmap`]: linear-RGB
+//! irradiance textures (W/m²) with the UV1 coordinates and UV rectangle that address them
+//! — what Bevy's `Lightmap` takes (image, `uv_rect`, the mesh's UV_1). [`publish`] writes
+//! the components of one bake in one system run (its commands apply together), so the
+//! world never shows textures of two scene generations; it writes only those whose
+//! textures changed, so `Changed<BakedLightmap>` finds exactly the entities to
+//! re-upload, and it removes the component from entities the bake no longer covers.
+//!
+//! ```
+//! # use bevy_ecs::prelude::*;
+//! # use surfcache_ecs::BakedLightmap;
+//! /// A game's upload system: runs for the entities whose textures a bake changed.
+//! fn upload(changed: Query<(Entity, &BakedLightmap), Changed<BakedLightmap>>) {
+//!     for (entity, lightmap) in &changed {
+//!         if let Some(front) = &lightmap.front {
+//!             println!("{entity}: {}×{} texels", front.width, front.height);
+//!         }
+//!     }
+//! }
+//! # let mut schedule = Schedule::default();
+//! # schedule.add_systems(upload);
+//! ```
 
 use crate::baking::{BakeResult, BakedSurfaceCache};
 use bevy_ecs::prelude::*;
 use std::{collections::HashMap, sync::Arc};
 use surfcache_cache::IrradianceTexture;
 
-/// The irradiance textures of one mesh entity.
-#[derive(Clone, Debug, PartialEq)]
-pub struct EntityLightmap {
+/// The irradiance textures of one mesh entity (module docs), on the entity.
+#[derive(Component, Clone, Debug, PartialEq)]
+pub struct BakedLightmap {
     /// Front side (counter-clockwise).
     pub front: Option<Arc<IrradianceTexture>>,
     /// Back side, for double-sided materials baked on both sides.
@@ -27,29 +43,26 @@ pub struct EntityLightmap {
     pub version: u64,
 }
 
-/// Irradiance textures of every baked mesh entity (module docs).
-#[derive(Resource, Clone, Debug, Default, PartialEq)]
-pub struct PublishedLightmaps {
-    pub by_entity: HashMap<Entity, EntityLightmap>,
-    /// Scene generation of the bake these come from (0: nothing baked yet).
-    pub generation: u64,
-}
+/// A bake's textures grouped by entity, on their way from the bake to the entities (and
+/// kept with the baseline, so that the next bake can tell which textures it changed).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct EntityTextures(pub HashMap<Entity, BakedLightmap>);
 
-impl PublishedLightmaps {
+impl EntityTextures {
     /// Groups a cache's textures (instance `k` belongs to `entities[k]`) by entity; an
     /// entity whose textures equal those in `previous` keeps them and their version.
     pub fn from_textures(
         textures: Vec<IrradianceTexture>,
         entities: &[Entity],
         generation: u64,
-        previous: Option<&PublishedLightmaps>,
+        previous: Option<&EntityTextures>,
     ) -> Self {
-        let mut by_entity: HashMap<Entity, EntityLightmap> = HashMap::new();
+        let mut by_entity: HashMap<Entity, BakedLightmap> = HashMap::new();
         for t in textures {
             let Some(&entity) = entities.get(t.instance as usize) else {
                 continue;
             };
-            let entry = by_entity.entry(entity).or_insert(EntityLightmap {
+            let entry = by_entity.entry(entity).or_insert(BakedLightmap {
                 front: None,
                 back: None,
                 version: generation,
@@ -62,7 +75,7 @@ impl PublishedLightmaps {
         }
         if let Some(previous) = previous {
             for (entity, entry) in by_entity.iter_mut() {
-                if let Some(old) = previous.by_entity.get(entity)
+                if let Some(old) = previous.0.get(entity)
                     && same_texture(&old.front, &entry.front)
                     && same_texture(&old.back, &entry.back)
                 {
@@ -70,18 +83,7 @@ impl PublishedLightmaps {
                 }
             }
         }
-        Self {
-            by_entity,
-            generation,
-        }
-    }
-
-    /// Entities whose textures changed at `generation`.
-    pub fn changed_at(&self, generation: u64) -> impl Iterator<Item = Entity> + '_ {
-        self.by_entity
-            .iter()
-            .filter(move |(_, l)| l.version == generation)
-            .map(|(e, _)| *e)
+        Self(by_entity)
     }
 }
 
@@ -103,7 +105,7 @@ fn same_texture(a: &Option<Arc<IrradianceTexture>>, b: &Option<Arc<IrradianceTex
 }
 
 /// The message sent when a bake or re-bake was published: its results are then in
-/// [`BakedSurfaceCache`] and [`PublishedLightmaps`].
+/// [`BakedSurfaceCache`] and on the entities ([`BakedLightmap`]).
 #[derive(Message, Clone, Debug, PartialEq)]
 pub struct BakeFinished {
     /// Scene generation it was baked from.
@@ -123,44 +125,53 @@ pub struct BakeFinished {
 #[derive(Resource, Default)]
 pub struct PendingPublish(pub(crate) Option<BakeResult>);
 
-/// Publish: swaps a finished bake into [`BakedSurfaceCache`] and
-/// [`PublishedLightmaps`] and sends [`BakeFinished`].
+/// Publish: swaps a finished bake into [`BakedSurfaceCache`] and the entities'
+/// [`BakedLightmap`]s (module docs) and sends [`BakeFinished`]. An entity despawned while
+/// the bake ran gets nothing; one despawned since the last publish counts as removed.
 pub fn publish(
+    mut commands: Commands,
     mut pending: ResMut<PendingPublish>,
     mut cache: ResMut<BakedSurfaceCache>,
-    mut lightmaps: ResMut<PublishedLightmaps>,
+    lightmaps: Query<(Entity, Option<&BakedLightmap>)>,
+    mut last: Local<Vec<Entity>>,
     mut messages: MessageWriter<BakeFinished>,
 ) {
     let Some(f) = pending.0.take() else {
         return;
     };
-    let published = Arc::unwrap_or_clone(f.published);
     let same = |a: &Option<Arc<IrradianceTexture>>, b: &Option<Arc<IrradianceTexture>>| match (a, b)
     {
         (None, None) => true,
         (Some(a), Some(b)) => Arc::ptr_eq(a, b),
         _ => false,
     };
-    let mut updated: Vec<Entity> = published
-        .by_entity
-        .iter()
-        .filter(|(e, new)| {
-            lightmaps
-                .by_entity
-                .get(e)
-                .is_none_or(|old| !same(&old.front, &new.front) || !same(&old.back, &new.back))
-        })
-        .map(|(e, _)| *e)
-        .collect();
+    let mut updated: Vec<Entity> = Vec::new();
+    for (&entity, new) in &f.published.0 {
+        let Ok((_, old)) = lightmaps.get(entity) else {
+            continue;
+        };
+        if old.is_none_or(|old| !same(&old.front, &new.front) || !same(&old.back, &new.back)) {
+            commands.entity(entity).insert(new.clone());
+            updated.push(entity);
+        }
+    }
     updated.sort();
+    // Entities that carry textures or got them last time, and are not in this bake.
     let mut removed: Vec<Entity> = lightmaps
-        .by_entity
-        .keys()
-        .filter(|e| !published.by_entity.contains_key(e))
-        .copied()
+        .iter()
+        .filter(|(_, old)| old.is_some())
+        .map(|(e, _)| e)
+        .chain(last.iter().copied())
+        .filter(|e| !f.published.0.contains_key(e))
         .collect();
     removed.sort();
-    *lightmaps = published;
+    removed.dedup();
+    for &entity in &removed {
+        if lightmaps.contains(entity) {
+            commands.entity(entity).remove::<BakedLightmap>();
+        }
+    }
+    *last = f.published.0.keys().copied().collect();
     *cache = BakedSurfaceCache {
         outcome: Some(f.outcome),
         scene: Some(f.scene),

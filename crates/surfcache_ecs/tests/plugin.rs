@@ -5,12 +5,12 @@
 
 use bevy_ecs::prelude::*;
 use glam::{Affine3A, Vec3};
-use std::{sync::Arc, time::Duration};
+use std::{collections::BTreeMap, sync::Arc, time::Duration};
 use surfcache_cache::{Cache, CacheSettings, Method, SurfaceCache, bake::BakeSettings};
 use surfcache_core::{Environment, Instance, Material, Mesh, Scene, sampling::Rng, scenes};
 use surfcache_ecs::{
-    BakeConfig, BakeFinished, BakeMode, BakedSurfaceCache, BvhBuilds, EnvironmentLight,
-    InstanceName, PublishedLightmaps, SurfaceMaterial, SurfcachePlugin, TracedSceneState,
+    BakeConfig, BakeFinished, BakeMode, BakedLightmap, BakedSurfaceCache, BvhBuilds,
+    EnvironmentLight, InstanceName, SurfaceMaterial, SurfcachePlugin, TracedSceneState,
     WorldTransform, spawn_scene,
 };
 use surfcache_trace::{EstimatorSettings, TracedScene};
@@ -93,6 +93,15 @@ fn rel_rms(scene: &TracedScene, a: &dyn SurfaceCache, b: &dyn SurfaceCache) -> f
         .map(|(a, b)| (((*a - *b) / (*b + eps)).length_squared()) as f64)
         .sum();
     (sq / (3 * pairs.len()) as f64).sqrt()
+}
+
+/// Every entity's published textures (its [`BakedLightmap`] component).
+fn lightmaps(world: &mut World) -> BTreeMap<Entity, BakedLightmap> {
+    world
+        .query::<(Entity, &BakedLightmap)>()
+        .iter(world)
+        .map(|(e, l)| (e, l.clone()))
+        .collect()
 }
 
 fn entity_named(world: &mut World, name: &str) -> Entity {
@@ -235,12 +244,7 @@ fn added_entity_is_baked_and_removed_entity_textures_disappear() {
     let (mut world, mut schedule, entities) = world_with(&scene, config(Method::Lightmap));
     bake(&mut world, &mut schedule);
     let block = entity_named(&mut world, "short_block");
-    assert!(
-        world
-            .resource::<PublishedLightmaps>()
-            .by_entity
-            .contains_key(&block)
-    );
+    assert!(world.get::<BakedLightmap>(block).is_some());
     // Add a copy of the tall block, moved: re-baked incrementally, published.
     let tall = scene
         .instances
@@ -258,18 +262,21 @@ fn added_entity_is_baked_and_removed_entity_textures_disappear() {
     let done = bake(&mut world, &mut schedule);
     assert!(done.incremental);
     assert!(done.updated.contains(&added));
-    let published = world.resource::<PublishedLightmaps>();
-    assert!(published.by_entity[&added].front.is_some());
-    assert_eq!(published.generation, done.generation);
+    assert!(world.get::<BakedLightmap>(added).unwrap().front.is_some());
+    // The components that changed are exactly the updated entities'.
+    for (entity, lightmap) in lightmaps(&mut world) {
+        let changed = lightmap.version == done.generation;
+        assert_eq!(changed, done.updated.contains(&entity), "{entity}");
+    }
     // Remove the short block: its textures disappear, the others stay.
     world.despawn(block);
     let done = bake(&mut world, &mut schedule);
     assert!(done.incremental);
     assert_eq!(done.removed, vec![block]);
-    let published = world.resource::<PublishedLightmaps>();
-    assert!(!published.by_entity.contains_key(&block));
-    assert!(published.by_entity.contains_key(&entities[0]));
-    assert_eq!(published.by_entity.len(), scene.instances.len());
+    let published = lightmaps(&mut world);
+    assert!(!published.contains_key(&block));
+    assert!(published.contains_key(&entities[0]));
+    assert_eq!(published.len(), scene.instances.len());
 }
 
 #[test]
@@ -348,8 +355,7 @@ fn results_are_identical_across_frame_budgets() {
         };
         let (mut world, mut schedule, _) = world_with(&scene, config);
         bake(&mut world, &mut schedule);
-        let published = world.resource::<PublishedLightmaps>().clone();
-        results.push(published);
+        results.push(lightmaps(&mut world));
     }
     for r in &results[1..] {
         assert_eq!(r, &results[0]);
@@ -363,12 +369,12 @@ fn settings_changes_rebake_and_unchanged_settings_republish() {
     let scene = scenes::cornell();
     let (mut world, mut schedule, _) = world_with(&scene, config(Method::Lightmap));
     let first = bake(&mut world, &mut schedule);
-    let published = world.resource::<PublishedLightmaps>().clone();
+    let published = lightmaps(&mut world);
     world.insert_resource(config(Method::Lightmap));
     let again = bake(&mut world, &mut schedule);
     assert!(again.updated.is_empty() && again.removed.is_empty());
     assert_eq!(again.generation, first.generation);
-    assert_eq!(world.resource::<PublishedLightmaps>(), &published);
+    assert_eq!(lightmaps(&mut world), published);
     world.insert_resource(config(Method::IrradianceMap));
     let other = bake(&mut world, &mut schedule);
     assert!(!other.incremental);
