@@ -8,12 +8,15 @@
 mod common;
 
 use common::{bake, estimator, grey, instance, lookup, traced};
-use std::f32::consts::PI;
-use surfcache::cache::{CacheSettings, IrradianceMapSettings, LightmapSettings};
+use std::{f32::consts::PI, sync::Arc};
+use surfcache::cache::{
+    CacheSettings, IrradianceMapSettings, LightmapSettings, Method, SurfaceCache,
+    bake::{BakeJob, BakeSettings},
+};
 use surfcache::core::{
-    Environment, Material,
-    glam::Vec3,
-    scenes::{cuboid, square},
+    Environment, Instance, Material,
+    glam::{Affine3A, Quat, Vec3},
+    scenes::{cuboid, square, tiled_floor},
 };
 
 /// The caches that gather bounce passes (irradiance maps and lightmaps), front faces only.
@@ -54,6 +57,77 @@ fn furnace_box_through_bounce_passes_sums_the_series() {
                     (got[c] - expected[c]).abs() <= tol,
                     "{}: channel {c} at {x}: {got} against {expected}",
                     settings.method().name()
+                );
+            }
+        }
+    }
+}
+
+/// The unit box `[0, 1]³` with its inward faces each tiled into `cells × cells` squares.
+fn tiled_box(cells: u32, material: &Material) -> Vec<Instance> {
+    let tile = Arc::new(tiled_floor(1.0, cells));
+    [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z]
+        .into_iter()
+        .map(|inward| Instance {
+            name: format!("wall {inward}"),
+            mesh: tile.clone(),
+            material: Arc::new(material.clone()),
+            // The tile (normal +Y) centred, turned to face inwards, moved to its face.
+            transform: Affine3A::from_translation(Vec3::splat(0.5) - 0.5 * inward)
+                * Affine3A::from_quat(Quat::from_rotation_arc(Vec3::Y, inward))
+                * Affine3A::from_translation(Vec3::new(-0.5, 0.0, -0.5)),
+        })
+        .collect()
+}
+
+/// Bounce passes of irradiance maps over a finely tessellated mesh (every triangle shorter
+/// than a sample spacing of the bounce density) are lightmaps, over large triangles their
+/// own grids (docs/design.md, Baking); either way the furnace box sums the series to
+/// π Le / (1 − ρ).
+#[test]
+fn fine_meshes_bounce_through_lightmaps_and_still_sum_the_series() {
+    let (le, rho) = (Vec3::new(1.0, 2.0, 0.5), 0.6);
+    let expected = PI * le / (1.0 - rho);
+    let wall = Material::emissive("wall", Vec3::splat(rho), le);
+    let coarse = traced(
+        vec![instance(
+            cuboid("box", Vec3::ZERO, Vec3::ONE, true),
+            wall.clone(),
+        )],
+        Environment::black(),
+    );
+    // 12.5 cm tiles: diagonals of 18 cm against the bounce passes' 25 cm spacing.
+    let fine = traced(tiled_box(8, &wall), Environment::black());
+    let rel = 0.02;
+    for (scene, bounce) in [(&coarse, Method::IrradianceMap), (&fine, Method::Lightmap)] {
+        let mut job = BakeJob::new(BakeSettings {
+            cache: CacheSettings::IrradianceMap(IrradianceMapSettings {
+                density: 8.0,
+                both_sides: false,
+                ..Default::default()
+            }),
+            estimator: estimator(rel),
+            density_budget: None,
+            ..Default::default()
+        });
+        while !job.step(scene, 4096) {}
+        let outcome = job.into_outcome().expect("the bake finished");
+        let (last, bounces) = outcome.passes.split_last().unwrap();
+        assert!(!bounces.is_empty());
+        assert!(bounces.iter().all(|p| p.method() == bounce), "{bounce:?}");
+        assert_eq!(last.method(), Method::IrradianceMap);
+        for (x, n) in [
+            (Vec3::new(0.5, 0.0, 0.3), Vec3::Y),
+            (Vec3::new(0.2, 1.0, 0.7), Vec3::NEG_Y),
+            (Vec3::new(0.0, 0.6, 0.9), Vec3::X),
+            (Vec3::new(0.9, 0.1, 1.0), Vec3::NEG_Z),
+        ] {
+            let got = lookup(last.as_ref(), scene, x, n);
+            for c in 0..3 {
+                let tol = 4.0 * rel * expected[c] + expected[c] / 1024.0;
+                assert!(
+                    (got[c] - expected[c]).abs() <= tol,
+                    "{bounce:?} bounces: channel {c} at {x}: {got} against {expected}"
                 );
             }
         }

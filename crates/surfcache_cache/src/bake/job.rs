@@ -2,7 +2,7 @@
 //! one bounce at a time, then the final cache; and the progress of such multi-pass jobs.
 
 use super::{BakeProgress, BakeSettings, Baker, FLOOR_FRACTION, fitted_density, mean_irradiance};
-use crate::{Cache, CacheSettings, SurfaceCache};
+use crate::{Cache, CacheSettings, IrradianceMapSettings, LightmapSettings, Method, SurfaceCache};
 use glam::Vec2;
 use std::sync::Arc;
 use surfcache_core::{
@@ -26,13 +26,25 @@ pub const BOUNCE_PROBES: u32 = 16_384;
 /// Key of the random streams every bounce pass draws from (the same in each pass).
 const BOUNCE_STREAM: u64 = 0x6761_7468_6572;
 
-/// Estimator settings of a bounce pass before a final pass with `final_estimator`: 4×
-/// the error bound (at most 10 %), a quarter of the sample limits (at least 16).
-fn bounce_pass_estimator(k: u32, final_estimator: &EstimatorSettings) -> EstimatorSettings {
+/// Estimator settings of bounce pass `k` of `method` before a final pass with
+/// `final_estimator`: 4× the error bound (at most 10 %), a quarter of the sample limits
+/// (at least 16), the limits first capped at `method`'s defaults where the final pass
+/// bakes another method ([`bounce_pass_cache`]).
+fn bounce_pass_estimator(
+    k: u32,
+    method: Method,
+    final_estimator: &EstimatorSettings,
+    final_method: Method,
+) -> EstimatorSettings {
+    let (mut min, mut max) = (final_estimator.min_samples, final_estimator.max_samples);
+    if method != final_method {
+        let (lo, hi) = method.default_sample_range();
+        (min, max) = (min.min(lo), max.min(hi));
+    }
     EstimatorSettings {
         max_rel_error: (final_estimator.max_rel_error * 4.0).min(0.1),
-        min_samples: (final_estimator.min_samples / 4).max(16),
-        max_samples: (final_estimator.max_samples / 4).max(16),
+        min_samples: (min / 4).max(16),
+        max_samples: (max / 4).max(16),
         // Pass 0 is direct light alone; later passes end every path at its first hit.
         max_bounces: if k == 0 {
             Some(0)
@@ -42,6 +54,50 @@ fn bounce_pass_estimator(k: u32, final_estimator: &EstimatorSettings) -> Estimat
         ..*final_estimator
     }
 }
+
+/// The cache the bounce passes before a final cache of `final_cache` bake over `scene`: at
+/// [`BOUNCE_PASS_DENSITY`] of the final density and unguided (a bounce pass reaches the
+/// final cache only through gathers over whole hemispheres, which average its noise:
+/// guiding would cost more than it buys).
+///
+/// A bounce pass is read only through gathers, so it may be any cache. Irradiance maps
+/// bounce through a lightmap where most triangles are no longer than one sample spacing
+/// of the bounce density ([`IrradianceMapSettings::order_one_share`] above
+/// [`FINE_MESH_SHARE`]): their grids would sample the mesh, several points per texel a
+/// lightmap of that density holds (Sponza: 0.88 M first-round points against 0.20 M
+/// texels a side at 4 per metre; docs/results.md, "Irradiance maps on Sponza"), while a
+/// lightmap samples the light at the density asked for. On coarser meshes their own grids
+/// resolve what lies between texels (a tunnel narrower than a texel). Vertex lighting,
+/// which has no density, bounces through vertex lighting.
+fn bounce_pass_cache(final_cache: &CacheSettings, scene: &TracedScene) -> CacheSettings {
+    match final_cache {
+        CacheSettings::Vertex(_) => *final_cache,
+        CacheSettings::IrradianceMap(m) => {
+            let maps = IrradianceMapSettings {
+                density: m.density * BOUNCE_PASS_DENSITY,
+                ..*m
+            };
+            if maps.order_one_share(scene) <= FINE_MESH_SHARE {
+                return CacheSettings::IrradianceMap(maps);
+            }
+            CacheSettings::Lightmap(LightmapSettings {
+                texels_per_metre: maps.density,
+                both_sides: m.both_sides,
+                guiding: false,
+                ..Default::default()
+            })
+        }
+        CacheSettings::Lightmap(l) => CacheSettings::Lightmap(LightmapSettings {
+            texels_per_metre: l.texels_per_metre * BOUNCE_PASS_DENSITY,
+            guiding: false,
+            ..*l
+        }),
+    }
+}
+
+/// Irradiance maps bounce through a lightmap when more than this share of the triangles
+/// is no longer than a sample spacing ([`bounce_pass_cache`]).
+pub const FINE_MESH_SHARE: f32 = 0.5;
 
 /// Where a [`BakeJob`] is.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -171,9 +227,11 @@ impl BakeOutcome {
 /// every later pass ends its paths at their first hit y with
 /// `L = L_e(y) + ρ/π · E_prev(y)` from the pass before
 /// ([`IrradianceLookup`](surfcache_trace::IrradianceLookup)), so it holds one bounce
-/// more, and a sample costs one bounce ray plus a shadow ray instead of a whole path. Bounce passes bake the final method at [`BOUNCE_PASS_DENSITY`] and a
-/// looser error bound ([`bounce_pass_estimator`]); their noise reaches the final cache
-/// only averaged over the hemispheres that gather it.
+/// more, and a sample costs one bounce ray plus a shadow ray instead of a whole path.
+/// Bounce passes bake lightmaps (vertex lighting for vertex lighting) at
+/// [`BOUNCE_PASS_DENSITY`] of the final density ([`bounce_pass_cache`]) and a looser error
+/// bound ([`bounce_pass_estimator`]); their noise reaches the final cache only averaged
+/// over the hemispheres that gather it.
 ///
 /// Every bounce pass draws the same random streams (*common random numbers*): a texel's
 /// samples take the same directions in pass k as in pass k − 1, so the two passes differ
@@ -205,6 +263,8 @@ pub struct BakeJob {
     /// The settings and an unbaked copy of the last cache laid out: bounce passes share
     /// one layout (a Sponza atlas takes seconds to make).
     layout: Option<(CacheSettings, Cache)>,
+    /// The cache of the bounce passes ([`bounce_pass_cache`]), once chosen.
+    bounce_cache: Option<CacheSettings>,
 }
 
 impl BakeJob {
@@ -225,6 +285,7 @@ impl BakeJob {
             added: Vec::new(),
             probes: Vec::new(),
             layout: None,
+            bounce_cache: None,
         }
     }
 
@@ -281,18 +342,12 @@ impl BakeJob {
             }
             (s.cache, estimator)
         } else {
-            let mut cache = s.cache;
-            // Coarser where the cache has a density (vertex lighting has none).
-            if let Some(density) = cache.density_mut() {
-                *density *= BOUNCE_PASS_DENSITY;
-            }
-            // A bounce pass reaches the final cache only through gathers over whole
-            // hemispheres, which average its noise: guiding would cost more than it buys
-            // (only lightmaps guide).
-            if let CacheSettings::Lightmap(lightmap) = &mut cache {
-                lightmap.guiding = false;
-            }
-            (cache, bounce_pass_estimator(k, &s.estimator))
+            let cache = *self
+                .bounce_cache
+                .get_or_insert_with(|| bounce_pass_cache(&s.cache, scene));
+            let estimator =
+                bounce_pass_estimator(k, cache.method(), &s.estimator, s.cache.method());
+            (cache, estimator)
         };
         // Bounce passes draw from streams of their own, the same stream in every bounce
         // pass (module docs: common random numbers).
@@ -436,7 +491,8 @@ impl BakeJob {
             Some(_) => BOUNCE_PASS_DENSITY * BOUNCE_PASS_DENSITY,
             None => 1.0,
         };
-        let bounce = bounce_pass_estimator(1, &s.estimator);
+        let bounce_method = self.bounce_cache.map_or(s.cache.method(), |c| c.method());
+        let bounce = bounce_pass_estimator(1, bounce_method, &s.estimator, s.cache.method());
         let samples = bounce.min_samples.max(1) as f32 / s.estimator.min_samples.max(1) as f32;
         points * samples.min(1.0)
     }

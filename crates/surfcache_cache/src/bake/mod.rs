@@ -15,8 +15,8 @@ pub use baker::{BakeProgress, Baker, bake_to_convergence};
 pub use estimation::{Previous, estimate_point, map_site, mean_irradiance, sample_frame};
 pub(crate) use job::step_pass;
 pub use job::{
-    BOUNCE_PASS_DENSITY, BOUNCE_PROBES, BOUNCE_TAIL_SHARE, BakeJob, BakeOutcome, JobProgress,
-    TRACE_PASSES_VAR,
+    BOUNCE_PASS_DENSITY, BOUNCE_PROBES, BOUNCE_TAIL_SHARE, BakeJob, BakeOutcome, FINE_MESH_SHARE,
+    JobProgress, TRACE_PASSES_VAR,
 };
 pub use settings::{
     BakeSettings, DEFAULT_DENSITY_BUDGET, DEFAULT_GATHER_PASSES, MIN_FITTED_DENSITY, fitted_density,

@@ -4,7 +4,8 @@
 use super::MAX_ORDER_LIMIT;
 use crate::CacheStats;
 use serde::{Deserialize, Serialize};
-use surfcache_trace::Estimate;
+use surfcache_core::geometry::longest_edge;
+use surfcache_trace::{Estimate, TracedScene};
 
 /// How irradiance maps refine and what they store.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -87,6 +88,20 @@ impl IrradianceMapSettings {
             1
         };
         target.clamp(1, self.order_cap())
+    }
+}
+
+impl IrradianceMapSettings {
+    /// The share of `scene`'s triangles no longer than one sample spacing, whose grids
+    /// keep order 1 (their three corners): where it is large, the grids sample the mesh
+    /// rather than the light.
+    pub fn order_one_share(&self, scene: &TracedScene) -> f32 {
+        let positions = scene.positions();
+        let small = positions
+            .iter()
+            .filter(|[a, b, c]| self.max_order_for(longest_edge(*a, *b, *c)) == 1)
+            .count();
+        small as f32 / positions.len().max(1) as f32
     }
 }
 
