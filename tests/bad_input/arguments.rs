@@ -7,7 +7,8 @@ use std::process::{Command, Output};
 
 // --- command-line arguments -----------------------------------------------------------------
 
-pub(crate) fn unknown_builtin_scene() {
+#[test]
+fn unknown_builtin_scene() {
     let dir = temp_dir("unknown_builtin_scene");
     let points = points_csv(&dir);
     expect_error(
@@ -16,7 +17,8 @@ pub(crate) fn unknown_builtin_scene() {
     );
 }
 
-pub(crate) fn missing_files() {
+#[test]
+fn missing_files() {
     let dir = temp_dir("missing_files");
     let points = points_csv(&dir);
     let scene = dir.join("absent.gltf");
@@ -34,7 +36,8 @@ pub(crate) fn missing_files() {
     );
 }
 
-pub(crate) fn points_csv_with_bad_header() {
+#[test]
+fn points_csv_with_bad_header() {
     let dir = temp_dir("points_csv_with_bad_header");
     let path = dir.join("bad_header.csv");
     std::fs::write(&path, "x,y,z,r,g,b\n0.3,0,0.3,0,1,0\n").unwrap();
@@ -62,7 +65,8 @@ fn bake(out: &Path, args: &[&str]) -> Output {
 
 /// An option of one method given with another is an error, not silently ignored
 /// (docs/cli.md, `surfcache bake`), and nothing is written.
-pub(crate) fn bake_options_that_do_not_apply_to_the_method() {
+#[test]
+fn bake_options_that_do_not_apply_to_the_method() {
     let dir = temp_dir("bake_options_that_do_not_apply_to_the_method");
     let out = dir.join("out");
     let density = "--density applies to --method irradiance-map and lightmap only";

@@ -21,7 +21,8 @@ fn write_env(path: &Path, at: (usize, usize), channel: usize, special: f32) {
     .unwrap();
 }
 
-pub(crate) fn environment_map_with_nan() {
+#[test]
+fn environment_map_with_nan() {
     let dir = temp_dir("environment_map_with_nan");
     let points = points_csv(&dir);
     let env = dir.join("nan.exr");
@@ -32,7 +33,8 @@ pub(crate) fn environment_map_with_nan() {
     );
 }
 
-pub(crate) fn environment_map_with_infinity() {
+#[test]
+fn environment_map_with_infinity() {
     let dir = temp_dir("environment_map_with_infinity");
     let points = points_csv(&dir);
     let env = dir.join("inf.exr");
@@ -43,7 +45,8 @@ pub(crate) fn environment_map_with_infinity() {
     );
 }
 
-pub(crate) fn environment_map_with_negative_values_is_clamped() {
+#[test]
+fn environment_map_with_negative_values_is_clamped() {
     let dir = temp_dir("environment_map_with_negative_values_is_clamped");
     let points = points_csv(&dir);
     let env = dir.join("negative.exr");
@@ -67,7 +70,8 @@ pub(crate) fn environment_map_with_negative_values_is_clamped() {
     }
 }
 
-pub(crate) fn environment_map_without_rgb_channels() {
+#[test]
+fn environment_map_without_rgb_channels() {
     let dir = temp_dir("environment_map_without_rgb_channels");
     let points = points_csv(&dir);
     use exr::prelude::WritableImage;
@@ -85,7 +89,8 @@ pub(crate) fn environment_map_without_rgb_channels() {
     );
 }
 
-pub(crate) fn environment_map_that_is_not_exr() {
+#[test]
+fn environment_map_that_is_not_exr() {
     let dir = temp_dir("environment_map_that_is_not_exr");
     let points = points_csv(&dir);
     let env = dir.join("text.exr");

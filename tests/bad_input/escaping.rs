@@ -52,7 +52,8 @@ fn assert_name_cut(line: &str) {
 }
 
 /// glTF names (mesh, material, node, image, URIs, extensions) through `.gltf` and `.glb`.
-pub(crate) fn gltf_names_are_escaped() {
+#[test]
+fn gltf_names_are_escaped() {
     let dir = temp_dir("gltf_names_are_escaped");
     let points = points_csv(&dir);
     let name = hostile_name();
@@ -184,7 +185,8 @@ pub(crate) fn gltf_names_are_escaped() {
 }
 
 /// A mesh name in a warning (the file still loads): one printable warning line.
-pub(crate) fn gltf_names_in_warnings_are_escaped() {
+#[test]
+fn gltf_names_in_warnings_are_escaped() {
     let dir = temp_dir("gltf_names_in_warnings_are_escaped");
     let points = points_csv(&dir);
     let mut doc = cornell_json();
@@ -202,7 +204,8 @@ pub(crate) fn gltf_names_in_warnings_are_escaped() {
 
 /// An EXR whose channel names hold a line break, an escape sequence and bytes that are not
 /// UTF-8 (the fuzz failure of `SURFCACHE_FUZZ_SEED=1796197522859263124`, by hand).
-pub(crate) fn exr_channel_names_are_escaped() {
+#[test]
+fn exr_channel_names_are_escaped() {
     use exr::prelude::*;
     let dir = temp_dir("exr_channel_names_are_escaped");
     let points = points_csv(&dir);
@@ -231,7 +234,8 @@ pub(crate) fn exr_channel_names_are_escaped() {
 
 /// Paths with control characters and bytes that are not UTF-8, the CSV points header and a
 /// built-in scene name.
-pub(crate) fn paths_csv_headers_and_scene_names_are_escaped() {
+#[test]
+fn paths_csv_headers_and_scene_names_are_escaped() {
     use std::os::unix::ffi::OsStrExt;
     let dir = temp_dir("paths_csv_headers_and_scene_names_are_escaped");
     let points = points_csv(&dir);

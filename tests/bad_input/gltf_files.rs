@@ -11,7 +11,8 @@ use std::path::Path;
 
 // --- containers ---------------------------------------------------------------------------
 
-pub(crate) fn truncated_glb() {
+#[test]
+fn truncated_glb() {
     let dir = temp_dir("truncated_glb");
     let points = points_csv(&dir);
     let glb = glb_of(&cornell_json(), &cornell_bin());
@@ -32,7 +33,8 @@ pub(crate) fn truncated_glb() {
     }
 }
 
-pub(crate) fn garbage_named_glb() {
+#[test]
+fn garbage_named_glb() {
     let dir = temp_dir("garbage_named_glb");
     let points = points_csv(&dir);
     // Deterministic noise (a 64-bit LCG), never starting with "glTF" or '{'.
@@ -67,7 +69,8 @@ pub(crate) fn garbage_named_glb() {
     expect_error(&reference(&empty, &points, &[]), &["empty.glb", "empty"]);
 }
 
-pub(crate) fn malformed_json_gltf() {
+#[test]
+fn malformed_json_gltf() {
     let dir = temp_dir("malformed_json_gltf");
     let points = points_csv(&dir);
     std::fs::write(dir.join("cornell.bin"), cornell_bin()).unwrap();
@@ -87,7 +90,8 @@ pub(crate) fn malformed_json_gltf() {
 
 // --- referenced files ---------------------------------------------------------------------
 
-pub(crate) fn missing_buffer_file() {
+#[test]
+fn missing_buffer_file() {
     let dir = temp_dir("missing_buffer_file");
     let points = points_csv(&dir);
     let mut doc = cornell_json();
@@ -100,7 +104,8 @@ pub(crate) fn missing_buffer_file() {
     );
 }
 
-pub(crate) fn missing_image_file() {
+#[test]
+fn missing_image_file() {
     let dir = temp_dir("missing_image_file");
     let points = points_csv(&dir);
     let mut doc = cornell_json();
@@ -116,7 +121,8 @@ pub(crate) fn missing_image_file() {
 
 // --- accessors and primitives ---------------------------------------------------------------
 
-pub(crate) fn accessor_out_of_range() {
+#[test]
+fn accessor_out_of_range() {
     let dir = temp_dir("accessor_out_of_range");
     let points = points_csv(&dir);
     let bin = cornell_bin();
@@ -176,7 +182,8 @@ pub(crate) fn accessor_out_of_range() {
     );
 }
 
-pub(crate) fn points_and_lines_primitives_are_skipped() {
+#[test]
+fn points_and_lines_primitives_are_skipped() {
     let dir = temp_dir("points_and_lines_primitives_are_skipped");
     let points = points_csv(&dir);
     let mut doc = cornell_json();
@@ -198,7 +205,8 @@ pub(crate) fn points_and_lines_primitives_are_skipped() {
     );
 }
 
-pub(crate) fn only_points_and_lines_is_an_error() {
+#[test]
+fn only_points_and_lines_is_an_error() {
     let dir = temp_dir("only_points_and_lines_is_an_error");
     let points = points_csv(&dir);
     let mut doc = cornell_json();
@@ -217,7 +225,8 @@ pub(crate) fn only_points_and_lines_is_an_error() {
     );
 }
 
-pub(crate) fn nan_vertex_position() {
+#[test]
+fn nan_vertex_position() {
     let dir = temp_dir("nan_vertex_position");
     let points = points_csv(&dir);
     let doc = cornell_json();
@@ -233,7 +242,8 @@ pub(crate) fn nan_vertex_position() {
     );
 }
 
-pub(crate) fn infinite_vertex_position() {
+#[test]
+fn infinite_vertex_position() {
     let dir = temp_dir("infinite_vertex_position");
     let points = points_csv(&dir);
     let doc = cornell_json();
@@ -249,7 +259,8 @@ pub(crate) fn infinite_vertex_position() {
     );
 }
 
-pub(crate) fn degenerate_triangles_are_dropped() {
+#[test]
+fn degenerate_triangles_are_dropped() {
     let dir = temp_dir("degenerate_triangles_are_dropped");
     let points = points_csv(&dir);
     let doc = cornell_json();

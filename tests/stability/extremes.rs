@@ -39,7 +39,8 @@ use surfcache::trace::{Estimate, EstimatorSettings, PointInScene, Sampler, estim
 /// plane every estimate stops within a few hundred samples, the largest relative error
 /// stays within 5× the bound (a normal tail over 64 points, no fireflies), the mean over
 /// the points is unbiased, and an irradiance map of the plane agrees too.
-pub(crate) fn hdr_sun_is_sampled_without_fireflies() {
+#[test]
+fn hdr_sun_is_sampled_without_fireflies() {
     let (w, h) = (720u32, 360u32);
     let (l_sun, l_sky) = (1e5f32, 0.2f32);
     let (si, sj) = (300u32, 90u32);
@@ -150,7 +151,8 @@ pub(crate) fn hdr_sun_is_sampled_without_fireflies() {
 /// space scaled by the diagonal ([`surfcache::trace::bvh`]). The reference, irradiance
 /// maps and lightmaps (texel density scaled with the scene) give the closed forms at
 /// both scales.
-pub(crate) fn closed_forms_hold_at_1_mm_and_10_km() {
+#[test]
+fn closed_forms_hold_at_1_mm_and_10_km() {
     let v = Vec3::new;
     let l = Vec3::new(0.5, 1.0, 2.0);
     let rel = 0.03;

@@ -114,7 +114,8 @@ fn floor_around_a_sunken_box(thresholds: [f32; 2]) -> [([f32; 2], [u64; 2]); 2] 
 /// samples, or crossed by another surface, now refines to its maximum order, and the
 /// floor 2 mm to 1 cm outside the box matches the reference within the bake's tolerance
 /// (3 reference standard errors + 4·C·E) for both caches, detected or not.
-pub(crate) fn intersecting_box_buried_samples_are_detected_and_not_used() {
+#[test]
+fn intersecting_box_buried_samples_are_detected_and_not_used() {
     let [(worst, buried), (undetected, none)] = floor_around_a_sunken_box([0.5, 2.0]);
     eprintln!("detected: worst errors {worst:?} tolerances, buried {buried:?}");
     eprintln!("undetected: worst errors {undetected:?} tolerances");
@@ -197,7 +198,8 @@ fn junk_mesh() -> (Mesh, usize) {
 /// whatever the geometry: the needles' baked and path-traced values match it, and no
 /// lookup or published texel anywhere is NaN or infinite — also for the scene whose
 /// degenerates were never dropped.
-pub(crate) fn degenerate_triangles_are_dropped_and_needles_bake_finite() {
+#[test]
+fn degenerate_triangles_are_dropped_and_needles_bake_finite() {
     let (mesh, degenerate) = junk_mesh();
     let total = mesh.indices.len();
     let l = Vec3::new(0.5, 1.0, 2.0);
@@ -330,7 +332,8 @@ fn bend_normals(mut mesh: Mesh, angle: f32, tilt: impl Fn(Vec3) -> Vec3) -> Mesh
 /// I ⟨ν, ω⟩/r² exactly — and a closed box with normals bent 80° stays exactly black
 /// inside under a sky 10⁴ times brighter. Checked for the reference, irradiance maps
 /// and lightmaps.
-pub(crate) fn bent_shading_normals_never_see_below_the_surface() {
+#[test]
+fn bent_shading_normals_never_see_below_the_surface() {
     let v = Vec3::new;
     let bend = 80f32.to_radians();
     let l = Vec3::new(0.5, 1.0, 2.0);

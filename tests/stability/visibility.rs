@@ -33,7 +33,8 @@ use surfcache::trace::{Estimate, EstimatorSettings, PointInScene, Sampler, estim
 /// the triangle's edge is never closer than that, so no ray slips past the slab's foot or
 /// under its edges. Inside the room, within 1 mm of the slab, both stay exactly black; the
 /// path-traced reference agrees; the slab's outer face matches the closed form.
-pub(crate) fn thin_wall_leaks_only_through_vertex_lighting() {
+#[test]
+fn thin_wall_leaks_only_through_vertex_lighting() {
     let v = Vec3::new;
     let thickness = 1e-3;
     let mut room = Mesh {
@@ -188,7 +189,8 @@ pub(crate) fn thin_wall_leaks_only_through_vertex_lighting() {
 /// refinement test to pass: at 32 texels per metre (3 cm) the strip is three texels wide
 /// and its centre matches the reference. Irradiance maps elsewhere on the floor (away
 /// from the strip) are right.
-pub(crate) fn shadow_strip_between_coarse_samples_is_caught_by_shadow_probes() {
+#[test]
+fn shadow_strip_between_coarse_samples_is_caught_by_shadow_probes() {
     let v = Vec3::new;
     let floor = quad(
         "floor",
@@ -357,7 +359,8 @@ fn periscope(a: f32, h: f32, l: f32) -> Mesh {
 ///   the final maps agree with the reference within 4·C·(E + ε) at the deep end and in
 ///   the shaft (points where E changes fast along the tunnel's entrance are left out:
 ///   there a coarse grid's interpolation dominates).
-pub(crate) fn dark_niche_black_blotches_and_how_gathering_removes_them() {
+#[test]
+fn dark_niche_black_blotches_and_how_gathering_removes_them() {
     let (a, h, l) = (0.1, 0.3, 0.4);
     let scene = traced_with_lights(
         vec![Instance::new(periscope(a, h, l), grey(0.8))],
