@@ -66,18 +66,25 @@ fn furnace_box_through_bounce_passes_sums_the_series() {
 /// The unit box `[0, 1]³` with its inward faces each tiled into `cells × cells` squares.
 fn tiled_box(cells: u32, material: &Material) -> Vec<Instance> {
     let tile = Arc::new(tiled_floor(1.0, cells));
-    [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z]
-        .into_iter()
-        .map(|inward| Instance {
-            name: format!("wall {inward}"),
-            mesh: tile.clone(),
-            material: Arc::new(material.clone()),
-            // The tile (normal +Y) centred, turned to face inwards, moved to its face.
-            transform: Affine3A::from_translation(Vec3::splat(0.5) - 0.5 * inward)
-                * Affine3A::from_quat(Quat::from_rotation_arc(Vec3::Y, inward))
-                * Affine3A::from_translation(Vec3::new(-0.5, 0.0, -0.5)),
-        })
-        .collect()
+    [
+        Vec3::X,
+        Vec3::NEG_X,
+        Vec3::Y,
+        Vec3::NEG_Y,
+        Vec3::Z,
+        Vec3::NEG_Z,
+    ]
+    .into_iter()
+    .map(|inward| Instance {
+        name: format!("wall {inward}"),
+        mesh: tile.clone(),
+        material: Arc::new(material.clone()),
+        // The tile (normal +Y) centred, turned to face inwards, moved to its face.
+        transform: Affine3A::from_translation(Vec3::splat(0.5) - 0.5 * inward)
+            * Affine3A::from_quat(Quat::from_rotation_arc(Vec3::Y, inward))
+            * Affine3A::from_translation(Vec3::new(-0.5, 0.0, -0.5)),
+    })
+    .collect()
 }
 
 /// Bounce passes of irradiance maps over a finely tessellated mesh (every triangle shorter
