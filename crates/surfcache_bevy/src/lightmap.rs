@@ -112,35 +112,16 @@ pub fn apply_lightmaps(
             continue;
         };
         let source = LightmappedMesh::source_of(state.as_deref(), &drawn.0);
-        let Some(source_mesh) = meshes.get(&source) else {
-            continue;
-        };
-        // The mesh to draw: the source if its UV1 is the layout, else a UV1 copy (kept
-        // when it already carries this layout).
-        let mut uv1_mesh = state.as_ref().and_then(|s| s.uv1_mesh.clone());
-        if has_uv1(source_mesh, &texture.uv1) {
-            uv1_mesh = None;
-        } else if !uv1_mesh
-            .as_ref()
-            .and_then(|h| meshes.get(h))
-            .is_some_and(|m| has_uv1(m, &texture.uv1))
-        {
-            let copy = match with_lightmap_uv1(source_mesh, &texture.uv1) {
-                Ok(copy) => copy,
-                Err(e) => {
-                    warn!("surfcache: no lightmap for {entity}: {e}");
-                    continue;
-                }
-            };
-            match &uv1_mesh {
-                Some(h) if meshes.contains(h) => {
-                    if let Some(mut m) = meshes.get_mut(h) {
-                        *m = copy;
-                    }
-                }
-                _ => uv1_mesh = Some(meshes.add(copy)),
+        let kept = state.as_ref().and_then(|s| s.uv1_mesh.clone());
+        let uv1_mesh = match uv1_mesh_for(&mut meshes, &source, kept, texture) {
+            Ok(Some(uv1_mesh)) => uv1_mesh,
+            // The source mesh is not loaded.
+            Ok(None) => continue,
+            Err(e) => {
+                warn!("surfcache: no lightmap for {entity}: {e}");
+                continue;
             }
-        }
+        };
         let target = uv1_mesh.clone().unwrap_or_else(|| source.clone());
         if drawn.0 != target {
             drawn.0 = target;
@@ -171,6 +152,41 @@ pub fn apply_lightmaps(
                 ));
             }
         }
+    }
+}
+
+/// The UV1 copy of `source` an entity draws with `texture`: none (`Some(None)`) when the
+/// source's own UV1 is the layout, else `kept` (the entity's copy) when it carries this
+/// layout, else a new copy, written over `kept` where that still exists. `None` while
+/// `source` is not loaded.
+fn uv1_mesh_for(
+    meshes: &mut Assets<Mesh>,
+    source: &Handle<Mesh>,
+    kept: Option<Handle<Mesh>>,
+    texture: &IrradianceTexture,
+) -> Result<Option<Option<Handle<Mesh>>>, String> {
+    let Some(source_mesh) = meshes.get(source) else {
+        return Ok(None);
+    };
+    if has_uv1(source_mesh, &texture.uv1) {
+        return Ok(Some(None));
+    }
+    if kept
+        .as_ref()
+        .and_then(|h| meshes.get(h))
+        .is_some_and(|m| has_uv1(m, &texture.uv1))
+    {
+        return Ok(Some(kept));
+    }
+    let copy = with_lightmap_uv1(source_mesh, &texture.uv1)?;
+    match kept {
+        Some(h) if meshes.contains(&h) => {
+            if let Some(mut m) = meshes.get_mut(&h) {
+                *m = copy;
+            }
+            Ok(Some(Some(h)))
+        }
+        _ => Ok(Some(Some(meshes.add(copy)))),
     }
 }
 
