@@ -218,100 +218,113 @@ impl IncrementalJob {
     }
 
     fn start_stage(&mut self, scene: &Arc<TracedScene>) {
+        let baker = if self.stage == 0 {
+            self.start_direct_stage(scene)
+        } else {
+            self.start_indirect_stage(scene, self.stage as usize)
+        };
+        self.baker = Some(baker);
+    }
+
+    /// Stage 0, the direct change: the cache remapped onto the edited scene; each point
+    /// estimates the change it gets through the directions towards the box around the
+    /// edit, where the edit's forward rays say it may exceed its error share.
+    fn start_direct_stage(&mut self, scene: &Arc<TracedScene>) -> Baker<Cache> {
         let settings = self.before.settings;
         let (lo, hi) = self.edit.region;
         let sphere = (
             0.5 * (lo + hi),
             0.5 * (hi - lo).length() + scene.spawn_offset(),
         );
-        let baker = if self.stage == 0 {
-            let cache = self
-                .before
-                .cache()
-                .remap(&self.old_scene, scene, &self.edit.triangle_map);
-            let influence = Arc::new(Influence::of_edit(
-                &self.old_scene,
-                scene,
-                self.before.cache().as_ref(),
-                self.old_lookup().as_ref(),
-                &self.edit.changed_old,
-                &self.edit.changed_new,
-                self.sample_spacing(scene),
-                settings.seed,
-            ));
-            self.influence = Some(influence.clone());
-            Baker::new(cache, settings.estimator, settings.seed)
-                .with_gather(self.old_lookup())
-                .with_previous(Previous {
-                    scene: self.old_scene.clone(),
-                    triangle_map: self.edit.triangle_map.clone(),
-                    gather: Some(self.before.cache().clone()),
-                    focus: Some(sphere),
-                    bound: None,
-                    influence: Some(influence),
-                    geometry_changed: true,
-                })
-        } else {
-            let k = self.stage as usize;
-            let latest = self.stages[k - 1].clone();
-            let before: Arc<dyn IrradianceLookup + Send> = match k {
-                1 => self.old_lookup(),
-                _ => self.stages[k - 2].clone(),
-            };
-            let identity: Arc<Vec<u32>> = Arc::new((0..scene.triangle_count() as u32).collect());
-            let cache = latest.remap(scene, scene, &identity);
-            // Indirect changes are a bounce weaker than the direct one: their estimates
-            // may carry twice the error share (INDIRECT_ERROR_FACTOR).
-            let estimator = EstimatorSettings {
-                max_rel_error: settings.estimator.max_rel_error * INDIRECT_ERROR_FACTOR,
-                ..settings.estimator
-            };
-            // What the stage integrates, ρ/π·(E_k − E_{k−1}) at first hits, bounded from
-            // every stored sample of both caches.
-            // A change within twice the noise the stage before may have left in its
-            // estimates ([`CHANGE_ERROR_SHARE`] of its bound) is not passed on: noise
-            // would otherwise spread one stage further each time.
-            let noise = |bound: f32| 2.0 * CHANGE_ERROR_SHARE * bound;
-            let (before_cache, map) = match k {
-                1 => (self.before.cache(), &self.edit.triangle_map),
-                _ => (&self.stages[k - 2], &identity),
-            };
-            let share = noise(match k {
-                1 => settings.estimator.max_rel_error,
-                _ => estimator.max_rel_error,
-            });
-            let changes = triangle_changes(&latest, before_cache, map, share);
-            let patches = change_patches(scene, &latest, before_cache, map, &changes, share);
-            let bound = ChangeBound::new(scene, &changes);
-            // Changes a quarter of the smallest allowance at most, all of them together.
-            let negligible = 0.25 * SKIP_SHARE * estimator.max_rel_error * estimator.floor;
-            let influence = Arc::new(Influence::of_changes(
-                scene,
-                latest.as_ref(),
-                before.as_ref(),
-                &patches,
-                negligible,
-                self.sample_spacing(scene),
-                settings.seed ^ k as u64,
-            ));
-            self.influence = Some(influence.clone());
-            Baker::new(
-                cache,
-                estimator,
-                settings.seed ^ splitmix64(0x696e_6469_7265_6374 + k as u64),
-            )
-            .with_gather(latest)
+        let cache = self
+            .before
+            .cache()
+            .remap(&self.old_scene, scene, &self.edit.triangle_map);
+        let influence = Arc::new(Influence::of_edit(
+            &self.old_scene,
+            scene,
+            self.before.cache().as_ref(),
+            self.old_lookup().as_ref(),
+            &self.edit.changed_old,
+            &self.edit.changed_new,
+            self.sample_spacing(scene),
+            settings.seed,
+        ));
+        self.influence = Some(influence.clone());
+        Baker::new(cache, settings.estimator, settings.seed)
+            .with_gather(self.old_lookup())
             .with_previous(Previous {
-                scene: scene.clone(),
-                triangle_map: identity,
-                gather: Some(before),
-                focus: None,
-                bound: Some(Arc::new(bound)),
+                scene: self.old_scene.clone(),
+                triangle_map: self.edit.triangle_map.clone(),
+                gather: Some(self.before.cache().clone()),
+                focus: Some(sphere),
+                bound: None,
                 influence: Some(influence),
-                geometry_changed: false,
+                geometry_changed: true,
             })
+    }
+
+    /// Stage `k` ≥ 1, the indirect change one bounce further: what stage k − 1 changed,
+    /// gathered from its cache against the one before it.
+    fn start_indirect_stage(&mut self, scene: &Arc<TracedScene>, k: usize) -> Baker<Cache> {
+        let settings = self.before.settings;
+        let latest = self.stages[k - 1].clone();
+        let before: Arc<dyn IrradianceLookup + Send> = match k {
+            1 => self.old_lookup(),
+            _ => self.stages[k - 2].clone(),
         };
-        self.baker = Some(baker);
+        let identity: Arc<Vec<u32>> = Arc::new((0..scene.triangle_count() as u32).collect());
+        let cache = latest.remap(scene, scene, &identity);
+        // Indirect changes are a bounce weaker than the direct one: their estimates
+        // may carry twice the error share (INDIRECT_ERROR_FACTOR).
+        let estimator = EstimatorSettings {
+            max_rel_error: settings.estimator.max_rel_error * INDIRECT_ERROR_FACTOR,
+            ..settings.estimator
+        };
+        // What the stage integrates, ρ/π·(E_k − E_{k−1}) at first hits, bounded from
+        // every stored sample of both caches.
+        // A change within twice the noise the stage before may have left in its
+        // estimates ([`CHANGE_ERROR_SHARE`] of its bound) is not passed on: noise
+        // would otherwise spread one stage further each time.
+        let noise = |bound: f32| 2.0 * CHANGE_ERROR_SHARE * bound;
+        let (before_cache, map) = match k {
+            1 => (self.before.cache(), &self.edit.triangle_map),
+            _ => (&self.stages[k - 2], &identity),
+        };
+        let share = noise(match k {
+            1 => settings.estimator.max_rel_error,
+            _ => estimator.max_rel_error,
+        });
+        let changes = triangle_changes(&latest, before_cache, map, share);
+        let patches = change_patches(scene, &latest, before_cache, map, &changes, share);
+        let bound = ChangeBound::new(scene, &changes);
+        // Changes a quarter of the smallest allowance at most, all of them together.
+        let negligible = 0.25 * SKIP_SHARE * estimator.max_rel_error * estimator.floor;
+        let influence = Arc::new(Influence::of_changes(
+            scene,
+            latest.as_ref(),
+            before.as_ref(),
+            &patches,
+            negligible,
+            self.sample_spacing(scene),
+            settings.seed ^ k as u64,
+        ));
+        self.influence = Some(influence.clone());
+        Baker::new(
+            cache,
+            estimator,
+            settings.seed ^ splitmix64(0x696e_6469_7265_6374 + k as u64),
+        )
+        .with_gather(latest)
+        .with_previous(Previous {
+            scene: scene.clone(),
+            triangle_map: identity,
+            gather: Some(before),
+            focus: None,
+            bound: Some(Arc::new(bound)),
+            influence: Some(influence),
+            geometry_changed: false,
+        })
     }
 
     /// Estimates up to `max_points` points of the edited `scene`; returns true once the
