@@ -405,36 +405,7 @@ impl Influence {
                 .into_par_iter()
                 .map(|i| {
                     let mut rng = Rng::new(stream ^ certain as u64, i as u64);
-                    let (s, k) = sources.sample(&mut rng);
-                    let (o, d) = sources.leave(&s, &mut rng);
-                    let weight = if certain {
-                        Vec3::INFINITY
-                    } else {
-                        // Drawn by the bound of |ΔL| on the patch: the ray carries ΔL(s)
-                        // over that bound.
-                        let front =
-                            s.geometric_normal == scene.geometric_normals()[s.triangle as usize];
-                        let change = match (
-                            after.irradiance(s.triangle, s.uv, front),
-                            before.irradiance(s.triangle, s.uv, front),
-                        ) {
-                            (Some(a), Some(b)) => a - b,
-                            _ => return None,
-                        };
-                        let albedo = scene
-                            .material_of(s.triangle)
-                            .albedo_at(scene.uv0_at(s.triangle, s.uv));
-                        let delta = albedo / PI * change;
-                        scale * delta / sources.weights[k]
-                    };
-                    if weight == Vec3::ZERO || weight.is_nan() {
-                        return None;
-                    }
-                    first_hit(scene, o, d).map(|x| ForwardHit {
-                        position: x.position,
-                        normal: x.geometric_normal,
-                        weight,
-                    })
+                    forward_ray(scene, after, before, &sources, certain, scale, &mut rng)
                 })
                 .collect();
             rays += n as u64;
@@ -647,4 +618,40 @@ fn shadow_hits(sources: &Sources, n: u32, stream: u64) -> (Vec<ForwardHit>, u64)
         hits.extend(found.into_iter().flatten());
     }
     (hits, rays)
+}
+
+/// One forward ray of [`Influence::of_changes`] from `sources`: its first hit, carrying
+/// `scale` · ΔL(s) / w_k of the point s it left (ΔL = ρ/π · ΔE between `after` and
+/// `before`, w_k the bound its patch was drawn by), or an infinite weight from sources
+/// whose change is unknown (`certain`). `None` where it carries nothing or meets nothing.
+fn forward_ray(
+    scene: &TracedScene,
+    after: &dyn IrradianceLookup,
+    before: &dyn IrradianceLookup,
+    sources: &Sources,
+    certain: bool,
+    scale: f32,
+    rng: &mut Rng,
+) -> Option<ForwardHit> {
+    let (s, k) = sources.sample(rng);
+    let (o, d) = sources.leave(&s, rng);
+    let weight = if certain {
+        Vec3::INFINITY
+    } else {
+        let front = s.geometric_normal == scene.geometric_normals()[s.triangle as usize];
+        let change = after.irradiance(s.triangle, s.uv, front)?
+            - before.irradiance(s.triangle, s.uv, front)?;
+        let albedo = scene
+            .material_of(s.triangle)
+            .albedo_at(scene.uv0_at(s.triangle, s.uv));
+        scale * (albedo / PI * change) / sources.weights[k]
+    };
+    if weight == Vec3::ZERO || weight.is_nan() {
+        return None;
+    }
+    first_hit(scene, o, d).map(|x| ForwardHit {
+        position: x.position,
+        normal: x.geometric_normal,
+        weight,
+    })
 }
