@@ -93,6 +93,37 @@ impl BakeOptions {
         if !(self.max_rel_error.is_finite() && self.max_rel_error > 0.0) {
             bail!("--max-rel-error must be a positive number");
         }
+        let (min_samples, max_samples) = self.sample_range()?;
+        if self.gather > 64 {
+            bail!("--gather takes at most 64 bounce passes");
+        }
+        let cache = self.cache_settings()?;
+        Ok(BakeSettings {
+            cache,
+            estimator: EstimatorSettings {
+                sampler: self.sampler,
+                max_rel_error: if self.samples.is_some() {
+                    0.0
+                } else {
+                    self.max_rel_error
+                },
+                min_samples,
+                max_samples,
+                floor: 0.0,
+                max_bounces: self.bounces,
+            },
+            seed: self.seed,
+            gather_passes: self.gather,
+            density_budget: match self.density {
+                Some(_) => None,
+                None => Some(surfcache_cache::bake::DEFAULT_DENSITY_BUDGET),
+            },
+        })
+    }
+
+    /// The hemisphere samples per estimate, `--samples` or `--min-samples`/`--max-samples`
+    /// over the method's defaults.
+    fn sample_range(&self) -> Result<(u32, u32)> {
         let (default_min, default_max) = self.method.default_sample_range();
         if let Some(n) = self.samples
             && (n == 0 || self.min_samples.is_some() || self.max_samples.is_some())
@@ -107,9 +138,12 @@ impl BakeOptions {
         if min_samples == 0 || max_samples < min_samples {
             bail!("need 1 ≤ --min-samples ≤ --max-samples (got {min_samples} and {max_samples})");
         }
-        if self.gather > 64 {
-            bail!("--gather takes at most 64 bounce passes");
-        }
+        Ok((min_samples, max_samples))
+    }
+
+    /// The cache to bake: the method's defaults with the options that apply to it; an
+    /// option for another method is an error.
+    fn cache_settings(&self) -> Result<CacheSettings> {
         let mut cache = CacheSettings::for_method(self.method);
         cache.set_both_sides(self.both_sides);
         if !self.share_corners {
@@ -151,27 +185,7 @@ impl BakeOptions {
             };
             lightmap.guiding = false;
         }
-        Ok(BakeSettings {
-            cache,
-            estimator: EstimatorSettings {
-                sampler: self.sampler,
-                max_rel_error: if self.samples.is_some() {
-                    0.0
-                } else {
-                    self.max_rel_error
-                },
-                min_samples,
-                max_samples,
-                floor: 0.0,
-                max_bounces: self.bounces,
-            },
-            seed: self.seed,
-            gather_passes: self.gather,
-            density_budget: match self.density {
-                Some(_) => None,
-                None => Some(surfcache_cache::bake::DEFAULT_DENSITY_BUDGET),
-            },
-        })
+        Ok(cache)
     }
 }
 
