@@ -330,6 +330,46 @@ impl CacheSettings {
         }
     }
 
+    /// The cache the bounce passes before a final cache of these settings bake over
+    /// `scene` ([`bake::BakeJob`]): at [`bake::BOUNCE_PASS_DENSITY`] of the final density
+    /// and unguided (a bounce pass reaches the final cache only through gathers over whole
+    /// hemispheres, which average its noise: guiding would cost more than it buys).
+    ///
+    /// A bounce pass is read only through gathers, so it may be any cache. Irradiance maps
+    /// bounce through a lightmap where most triangles are no longer than one sample
+    /// spacing of the bounce density ([`IrradianceMapSettings::order_one_share`] above
+    /// [`bake::FINE_MESH_SHARE`]): their grids would sample the mesh, several points per
+    /// texel a lightmap of that density holds (Sponza: 0.88 M first-round points against
+    /// 0.20 M texels a side at 4 per metre; docs/results.md, "Irradiance maps on Sponza"),
+    /// while a lightmap samples the light at the density asked for. On coarser meshes
+    /// their own grids resolve what lies between texels (a tunnel narrower than a texel).
+    /// Vertex lighting, which has no density, bounces through vertex lighting.
+    pub fn bounce_pass(&self, scene: &TracedScene) -> CacheSettings {
+        match self {
+            CacheSettings::Vertex(_) => *self,
+            CacheSettings::IrradianceMap(m) => {
+                let maps = IrradianceMapSettings {
+                    density: m.density * bake::BOUNCE_PASS_DENSITY,
+                    ..*m
+                };
+                if maps.order_one_share(scene) <= bake::FINE_MESH_SHARE {
+                    return CacheSettings::IrradianceMap(maps);
+                }
+                CacheSettings::Lightmap(LightmapSettings {
+                    texels_per_metre: maps.density,
+                    both_sides: m.both_sides,
+                    guiding: false,
+                    ..Default::default()
+                })
+            }
+            CacheSettings::Lightmap(l) => CacheSettings::Lightmap(LightmapSettings {
+                texels_per_metre: l.texels_per_metre * bake::BOUNCE_PASS_DENSITY,
+                guiding: false,
+                ..*l
+            }),
+        }
+    }
+
     /// The vertex-lighting settings, if this bakes vertex lighting.
     pub fn vertex(&self) -> Option<&VertexLightingSettings> {
         match self {

@@ -2,7 +2,7 @@
 //! one bounce at a time, then the final cache; and the progress of such multi-pass jobs.
 
 use super::{BakeProgress, BakeSettings, Baker, FLOOR_FRACTION, fitted_density, mean_irradiance};
-use crate::{Cache, CacheSettings, IrradianceMapSettings, LightmapSettings, Method, SurfaceCache};
+use crate::{Cache, CacheSettings, Method, SurfaceCache};
 use glam::Vec2;
 use std::sync::Arc;
 use surfcache_core::{
@@ -29,7 +29,7 @@ const BOUNCE_STREAM: u64 = 0x6761_7468_6572;
 /// Estimator settings of bounce pass `k` of `method` before a final pass with
 /// `final_estimator`: 4× the error bound (at most 10 %), a quarter of the sample limits
 /// (at least 16), the limits first capped at `method`'s defaults where the final pass
-/// bakes another method ([`bounce_pass_cache`]).
+/// bakes another method ([`CacheSettings::bounce_pass`]).
 fn bounce_pass_estimator(
     k: u32,
     method: Method,
@@ -55,48 +55,8 @@ fn bounce_pass_estimator(
     }
 }
 
-/// The cache the bounce passes before a final cache of `final_cache` bake over `scene`: at
-/// [`BOUNCE_PASS_DENSITY`] of the final density and unguided (a bounce pass reaches the
-/// final cache only through gathers over whole hemispheres, which average its noise:
-/// guiding would cost more than it buys).
-///
-/// A bounce pass is read only through gathers, so it may be any cache. Irradiance maps
-/// bounce through a lightmap where most triangles are no longer than one sample spacing
-/// of the bounce density ([`IrradianceMapSettings::order_one_share`] above
-/// [`FINE_MESH_SHARE`]): their grids would sample the mesh, several points per texel a
-/// lightmap of that density holds (Sponza: 0.88 M first-round points against 0.20 M
-/// texels a side at 4 per metre; docs/results.md, "Irradiance maps on Sponza"), while a
-/// lightmap samples the light at the density asked for. On coarser meshes their own grids
-/// resolve what lies between texels (a tunnel narrower than a texel). Vertex lighting,
-/// which has no density, bounces through vertex lighting.
-fn bounce_pass_cache(final_cache: &CacheSettings, scene: &TracedScene) -> CacheSettings {
-    match final_cache {
-        CacheSettings::Vertex(_) => *final_cache,
-        CacheSettings::IrradianceMap(m) => {
-            let maps = IrradianceMapSettings {
-                density: m.density * BOUNCE_PASS_DENSITY,
-                ..*m
-            };
-            if maps.order_one_share(scene) <= FINE_MESH_SHARE {
-                return CacheSettings::IrradianceMap(maps);
-            }
-            CacheSettings::Lightmap(LightmapSettings {
-                texels_per_metre: maps.density,
-                both_sides: m.both_sides,
-                guiding: false,
-                ..Default::default()
-            })
-        }
-        CacheSettings::Lightmap(l) => CacheSettings::Lightmap(LightmapSettings {
-            texels_per_metre: l.texels_per_metre * BOUNCE_PASS_DENSITY,
-            guiding: false,
-            ..*l
-        }),
-    }
-}
-
 /// Irradiance maps bounce through a lightmap when more than this share of the triangles
-/// is no longer than a sample spacing ([`bounce_pass_cache`]).
+/// is no longer than a sample spacing ([`CacheSettings::bounce_pass`]).
 pub const FINE_MESH_SHARE: f32 = 0.5;
 
 /// Where a [`BakeJob`] is.
@@ -229,7 +189,7 @@ impl BakeOutcome {
 /// ([`IrradianceLookup`](surfcache_trace::IrradianceLookup)), so it holds one bounce
 /// more, and a sample costs one bounce ray plus a shadow ray instead of a whole path.
 /// Bounce passes bake lightmaps (vertex lighting for vertex lighting) at
-/// [`BOUNCE_PASS_DENSITY`] of the final density ([`bounce_pass_cache`]) and a looser error
+/// [`BOUNCE_PASS_DENSITY`] of the final density ([`CacheSettings::bounce_pass`]) and a looser error
 /// bound ([`bounce_pass_estimator`]); their noise reaches the final cache only averaged
 /// over the hemispheres that gather it.
 ///
@@ -263,7 +223,7 @@ pub struct BakeJob {
     /// The settings and an unbaked copy of the last cache laid out: bounce passes share
     /// one layout (a Sponza atlas takes seconds to make).
     layout: Option<(CacheSettings, Cache)>,
-    /// The cache of the bounce passes ([`bounce_pass_cache`]), once chosen.
+    /// The cache of the bounce passes ([`CacheSettings::bounce_pass`]), once chosen.
     bounce_cache: Option<CacheSettings>,
 }
 
@@ -344,7 +304,7 @@ impl BakeJob {
         } else {
             let cache = *self
                 .bounce_cache
-                .get_or_insert_with(|| bounce_pass_cache(&s.cache, scene));
+                .get_or_insert_with(|| s.cache.bounce_pass(scene));
             let estimator =
                 bounce_pass_estimator(k, cache.method(), &s.estimator, s.cache.method());
             (cache, estimator)
