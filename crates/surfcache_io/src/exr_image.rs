@@ -110,61 +110,18 @@ fn find_rgb(channels: &[Channel]) -> Option<[&Channel; 3]> {
     })
 }
 
+/// An image of one layer, all its channels and attributes, as the exr crate reads it.
+type OneLayerImage = Image<Layer<AnyChannels<FlatSamples>>>;
+
 /// Reads the first layer's RGB into the display window (pixels outside the data window are
 /// black, with a warning), rejecting NaN and infinities.
 fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> {
     let bytes = std::fs::read(path).map_err(|e| IoError::read("EXR", path, e))?;
-    let exr_error = |e: exr::error::Error| match e {
-        exr::error::Error::Io(io) => IoError::read("EXR", path, io),
-        other => IoError::read(
-            "EXR",
-            path,
-            format!("not a readable OpenEXR file ({other})"),
-        ),
-    };
-    no_panic("EXR header check", || check_before_decoding(&bytes))
-        .map_err(|e| IoError::read("EXR", path, e))?
-        .map_err(exr_error)?
-        .map_err(|cause| IoError::exr(path, cause))?;
-    // `no_panic` stays as a safety net: the exr crate states many invariants of the file as
-    // (debug) assertions rather than errors; those found by fuzzing are checked above, and so
-    // are the sizes it would allocate.
-    // Decompression is sequential: in parallel, exr decompresses on a thread pool of its own
-    // built without a panic handler, where any panic aborts the whole process and `no_panic`
-    // cannot catch it.
-    let image = no_panic("EXR decoding", || {
-        exr::prelude::read()
-            .no_deep_data()
-            .largest_resolution_level()
-            .all_channels()
-            .first_valid_layer()
-            .all_attributes()
-            .non_parallel()
-            .from_buffered(std::io::Cursor::new(&bytes))
-    })
-    .map_err(|e| IoError::read("EXR", path, e))?
-    .map_err(exr_error)?;
-    let layer: &Layer<AnyChannels<FlatSamples>> = &image.layer_data;
+    let image = decode_first_layer(path, &bytes)?;
+    let layer = &image.layer_data;
     let channels = &layer.channel_data.list;
     let Some(rgb) = find_rgb(channels) else {
-        // At most LISTED names, so that a file of many channels still gives a short line.
-        const LISTED: usize = 8;
-        let mut found: Vec<String> = channels
-            .iter()
-            .take(LISTED)
-            .map(|c| Untrusted::bytes(c.name.bytes()).to_string())
-            .collect();
-        if channels.len() > LISTED {
-            found.push(format!("… ({} channels)", channels.len()));
-        }
-        return Err(IoError::MissingChannels {
-            path: path.to_path_buf(),
-            found: if found.is_empty() {
-                "none".into()
-            } else {
-                found.join(", ")
-            },
-        });
+        return Err(missing_channels(path, channels));
     };
     let (dw, dh) = (layer.size.0, layer.size.1);
     let n = dw.saturating_mul(dh);
@@ -201,6 +158,77 @@ fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> 
             Untrusted::path(path)
         ));
     }
+    let texels = place_data_window(path, rgb, (dw, dh), (ox, oy), (width, height))?;
+    Ok((w32, h32, texels, warnings))
+}
+
+/// Checks the file's headers ([`check_before_decoding`]) and decodes its first valid layer,
+/// all channels at the largest resolution level, without letting the exr crate panic.
+fn decode_first_layer(path: &Path, bytes: &[u8]) -> Result<OneLayerImage, IoError> {
+    let exr_error = |e: exr::error::Error| match e {
+        exr::error::Error::Io(io) => IoError::read("EXR", path, io),
+        other => IoError::read(
+            "EXR",
+            path,
+            format!("not a readable OpenEXR file ({other})"),
+        ),
+    };
+    no_panic("EXR header check", || check_before_decoding(bytes))
+        .map_err(|e| IoError::read("EXR", path, e))?
+        .map_err(exr_error)?
+        .map_err(|cause| IoError::exr(path, cause))?;
+    // `no_panic` stays as a safety net: the exr crate states many invariants of the file as
+    // (debug) assertions rather than errors; those found by fuzzing are checked above, and so
+    // are the sizes it would allocate.
+    // Decompression is sequential: in parallel, exr decompresses on a thread pool of its own
+    // built without a panic handler, where any panic aborts the whole process and `no_panic`
+    // cannot catch it.
+    no_panic("EXR decoding", || {
+        exr::prelude::read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .non_parallel()
+            .from_buffered(std::io::Cursor::new(bytes))
+    })
+    .map_err(|e| IoError::read("EXR", path, e))?
+    .map_err(exr_error)
+}
+
+/// The error for a layer without R, G, B channels, listing the channels it has.
+fn missing_channels(path: &Path, channels: &[Channel]) -> IoError {
+    // At most LISTED names, so that a file of many channels still gives a short line.
+    const LISTED: usize = 8;
+    let mut found: Vec<String> = channels
+        .iter()
+        .take(LISTED)
+        .map(|c| Untrusted::bytes(c.name.bytes()).to_string())
+        .collect();
+    if channels.len() > LISTED {
+        found.push(format!("… ({} channels)", channels.len()));
+    }
+    IoError::MissingChannels {
+        path: path.to_path_buf(),
+        found: if found.is_empty() {
+            "none".into()
+        } else {
+            found.join(", ")
+        },
+    }
+}
+
+/// The display window's texels (`width`×`height`, row-major, black where the data window
+/// does not reach) with the `dw`×`dh` data window of `rgb` placed at (`ox`, `oy`); an
+/// error names the first sample that is NaN or infinite.
+fn place_data_window(
+    path: &Path,
+    rgb: [&Channel; 3],
+    (dw, dh): (usize, usize),
+    (ox, oy): (i64, i64),
+    (width, height): (usize, usize),
+) -> Result<Vec<Vec3>, IoError> {
     let mut texels = vec![Vec3::ZERO; width * height];
     const NAMES: [&str; 3] = ["R", "G", "B"];
     for y in 0..dh {
@@ -230,7 +258,7 @@ fn read_rgb(path: &Path) -> Result<(u32, u32, Vec<Vec3>, Vec<String>), IoError> 
             }
         }
     }
-    Ok((w32, h32, texels, warnings))
+    Ok(texels)
 }
 
 /// What the exr crate takes for granted, checked from the headers and chunk headers before

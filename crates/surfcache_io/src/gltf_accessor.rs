@@ -1,7 +1,10 @@
 //! Bounds-checked reading of glTF accessors (the gltf crate's reader can panic on
 //! out-of-range or zero-count accessors, so this crate reads them itself).
 
-use gltf::accessor::{Accessor, DataType, Dimensions, sparse::IndexType};
+use gltf::accessor::{
+    Accessor, DataType, Dimensions,
+    sparse::{IndexType, Sparse},
+};
 
 /// The loaded buffers, by index (file, data URI or GLB chunk).
 pub(crate) type Buffers = [gltf::buffer::Data];
@@ -138,10 +141,42 @@ pub(crate) fn read_f32(
     if !allowed.contains(&t) {
         return Err(format!("{what} has unsupported component type {t:?}"));
     }
+    let mut out = read_dense_f32(acc, buffers, dims, &what)?;
+    if let Some(sparse) = acc.sparse() {
+        substitute_sparse_f32(acc, &sparse, buffers, dims, &mut out, &what)?;
+    }
+    Ok(out)
+}
+
+/// Decodes `dst.len()` consecutive components of type `t` from `data` starting at byte
+/// `base` ([`component`]); None when one of them runs past the end.
+fn components_into(
+    dst: &mut [f32],
+    data: &[u8],
+    base: usize,
+    t: DataType,
+    normalized: bool,
+) -> Option<()> {
     let size = component_size(t);
-    let elem = size * dims;
+    for (c, d) in dst.iter_mut().enumerate() {
+        *d = data
+            .get(base + c * size..)
+            .and_then(|b| component(b, t, normalized))?;
+    }
+    Some(())
+}
+
+/// The accessor's elements of `dims` components as f32 from its buffer view, all zero
+/// without one (before sparse substitution).
+fn read_dense_f32(
+    acc: &Accessor<'_>,
+    buffers: &Buffers,
+    dims: usize,
+    what: &str,
+) -> Result<Vec<f32>, String> {
+    let t = acc.data_type();
+    let elem = component_size(t) * dims;
     let count = acc.count();
-    let norm = acc.normalized();
     let viewed = match acc.view() {
         Some(view) => Some(view_elements(
             &view,
@@ -149,7 +184,7 @@ pub(crate) fn read_f32(
             acc.offset(),
             count,
             elem,
-            &what,
+            what,
         )?),
         None if count.saturating_mul(elem) > MAX_VIEWLESS_BYTES => {
             return Err(format!(
@@ -162,60 +197,65 @@ pub(crate) fn read_f32(
     let mut out = vec![0.0f32; count * dims];
     if let Some((data, stride)) = viewed {
         for (i, dst) in out.chunks_exact_mut(dims).enumerate() {
-            let base = acc.offset() + i * stride;
-            for (c, d) in dst.iter_mut().enumerate() {
-                *d = data
-                    .get(base + c * size..)
-                    .and_then(|b| component(b, t, norm))
-                    .ok_or_else(|| format!("{what}: element {i} is out of range"))?;
-            }
-        }
-    }
-    if let Some(sparse) = acc.sparse() {
-        let n = sparse.count();
-        let idx = sparse.indices();
-        let isize = match idx.index_type() {
-            IndexType::U8 => 1,
-            IndexType::U16 => 2,
-            IndexType::U32 => 4,
-        };
-        let (idata, _) = view_elements(
-            &idx.view(),
-            buffers,
-            idx.offset(),
-            n,
-            isize,
-            &format!("{what} sparse indices"),
-        )?;
-        let vals = sparse.values();
-        let (vdata, _) = view_elements(
-            &vals.view(),
-            buffers,
-            vals.offset(),
-            n,
-            elem,
-            &format!("{what} sparse values"),
-        )?;
-        for k in 0..n {
-            let target = idata
-                .get(idx.offset() + k * isize..)
-                .and_then(|b| integer(b, isize))
-                .ok_or_else(|| format!("{what}: sparse index {k} is out of range"))?
-                as usize;
-            let dst = out
-                .get_mut(target * dims..(target + 1) * dims)
-                .ok_or_else(|| {
-                    format!("{what}: sparse index {k} points at element {target} of {count}")
-                })?;
-            for (c, d) in dst.iter_mut().enumerate() {
-                *d = vdata
-                    .get(vals.offset() + k * elem + c * size..)
-                    .and_then(|b| component(b, t, norm))
-                    .ok_or_else(|| format!("{what}: sparse value {k} is out of range"))?;
-            }
+            components_into(dst, data, acc.offset() + i * stride, t, acc.normalized())
+                .ok_or_else(|| format!("{what}: element {i} is out of range"))?;
         }
     }
     Ok(out)
+}
+
+/// Replaces the elements of `out` (the accessor's, `dims` components each) that `sparse`
+/// lists by its values.
+fn substitute_sparse_f32(
+    acc: &Accessor<'_>,
+    sparse: &Sparse<'_>,
+    buffers: &Buffers,
+    dims: usize,
+    out: &mut [f32],
+    what: &str,
+) -> Result<(), String> {
+    let t = acc.data_type();
+    let elem = component_size(t) * dims;
+    let count = acc.count();
+    let n = sparse.count();
+    let idx = sparse.indices();
+    let isize = match idx.index_type() {
+        IndexType::U8 => 1,
+        IndexType::U16 => 2,
+        IndexType::U32 => 4,
+    };
+    let (idata, _) = view_elements(
+        &idx.view(),
+        buffers,
+        idx.offset(),
+        n,
+        isize,
+        &format!("{what} sparse indices"),
+    )?;
+    let vals = sparse.values();
+    let (vdata, _) = view_elements(
+        &vals.view(),
+        buffers,
+        vals.offset(),
+        n,
+        elem,
+        &format!("{what} sparse values"),
+    )?;
+    for k in 0..n {
+        let target = idata
+            .get(idx.offset() + k * isize..)
+            .and_then(|b| integer(b, isize))
+            .ok_or_else(|| format!("{what}: sparse index {k} is out of range"))?
+            as usize;
+        let dst = out
+            .get_mut(target * dims..(target + 1) * dims)
+            .ok_or_else(|| {
+                format!("{what}: sparse index {k} points at element {target} of {count}")
+            })?;
+        components_into(dst, vdata, vals.offset() + k * elem, t, acc.normalized())
+            .ok_or_else(|| format!("{what}: sparse value {k} is out of range"))?;
+    }
+    Ok(())
 }
 
 /// Reads a scalar unsigned-integer accessor (vertex indices).

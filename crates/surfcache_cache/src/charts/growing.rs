@@ -191,14 +191,7 @@ pub(super) fn grow(
     slot[seed as usize] = 0;
     // Candidates: (triangle, its entry edge, the chart triangle across, that one's edge).
     let mut queue: VecDeque<(u32, u8, u32, u8)> = VecDeque::new();
-    let push_neighbours = |t: u32, queue: &mut VecDeque<_>, chart: &[u32]| {
-        for (e, &(u, j)) in mesh.across[t as usize].iter().enumerate() {
-            if u != NO_INDEX && chart[u as usize] == NO_INDEX {
-                queue.push_back((u, j, t, e as u8));
-            }
-        }
-    };
-    push_neighbours(seed, &mut queue, chart);
+    queue_neighbours(mesh, seed, &mut queue, chart);
     while let Some((t, k, p, kp)) = queue.pop_front() {
         let tu = t as usize;
         if chart[tu] != NO_INDEX || !allowed(t) {
@@ -211,43 +204,10 @@ pub(super) fn grow(
         corners[k] = pcorners[(kp + 1) % 3];
         corners[(k + 1) % 3] = pcorners[kp];
         let third = (k + 2) % 3;
-        // The third corner through a second glued edge, when its known corner is the
-        // same chart vertex on both sides.
-        let in_chart = |u: u32| u != NO_INDEX && chart[u as usize] == id;
-        for e in [(k + 1) % 3, third] {
-            let (q, j) = mesh.across[tu][e];
-            if !in_chart(q) {
-                continue;
-            }
-            let qc = g.corners[slot[q as usize] as usize];
-            let j = j as usize;
-            // Corner e of t is corner j + 1 of q, corner e + 1 is corner j.
-            let (known, theirs, candidate) = if e == third {
-                (corners[k], qc[j], qc[(j + 1) % 3])
-            } else {
-                (corners[e], qc[(j + 1) % 3], qc[j])
-            };
-            if known == theirs {
-                corners[third] = candidate;
-                break;
-            }
-        }
-        // Gluing all three edges would close the chart: cut instead.
-        if corners[third] != NO_INDEX {
-            let glued = (0..3)
-                .filter(|&e| {
-                    let (q, j) = mesh.across[tu][e];
-                    in_chart(q) && {
-                        let qc = g.corners[slot[q as usize] as usize];
-                        let j = j as usize;
-                        corners[e] == qc[(j + 1) % 3] && corners[(e + 1) % 3] == qc[j]
-                    }
-                })
-                .count();
-            if glued == 3 {
-                corners[third] = NO_INDEX;
-            }
-        }
+        let placed = |u: u32| {
+            (u != NO_INDEX && chart[u as usize] == id).then(|| g.corners[slot[u as usize] as usize])
+        };
+        corners[third] = glued_third_corner(mesh.across[tu], k, corners, placed);
         if corners[third] == NO_INDEX {
             let p3 = mesh.positions[tu];
             let (ua, ub) = (
@@ -261,9 +221,69 @@ pub(super) fn grow(
         slot[tu] = g.tris.len() as u32;
         g.tris.push(t);
         g.corners.push(corners);
-        push_neighbours(t, &mut queue, chart);
+        queue_neighbours(mesh, t, &mut queue, chart);
     }
     g
+}
+
+/// Queues the neighbours of `t` across its smooth edges that no chart holds yet, as growth
+/// candidates (triangle, its entry edge, `t`, `t`'s edge).
+fn queue_neighbours(
+    mesh: &ChartMesh,
+    t: u32,
+    queue: &mut VecDeque<(u32, u8, u32, u8)>,
+    chart: &[u32],
+) {
+    for (e, &(u, j)) in mesh.across[t as usize].iter().enumerate() {
+        if u != NO_INDEX && chart[u as usize] == NO_INDEX {
+            queue.push_back((u, j, t, e as u8));
+        }
+    }
+}
+
+/// The chart vertex of the third corner (k + 2) of a triangle joining across its edge k
+/// (`corners` k and k + 1 known, `across` its neighbours), through a second glued edge
+/// when that edge's known corner is the same chart vertex on both sides; NO_INDEX when
+/// there is none, or when gluing all three edges would close the chart (it is cut
+/// instead). `placed(u)` gives the chart vertices of triangle `u` when it is in the chart.
+fn glued_third_corner(
+    across: [(u32, u8); 3],
+    k: usize,
+    mut corners: [u32; 3],
+    placed: impl Fn(u32) -> Option<[u32; 3]>,
+) -> u32 {
+    let third = (k + 2) % 3;
+    for e in [(k + 1) % 3, third] {
+        let (q, j) = across[e];
+        let Some(qc) = placed(q) else {
+            continue;
+        };
+        let j = j as usize;
+        // Corner e of t is corner j + 1 of q, corner e + 1 is corner j.
+        let (known, theirs, candidate) = if e == third {
+            (corners[k], qc[j], qc[(j + 1) % 3])
+        } else {
+            (corners[e], qc[(j + 1) % 3], qc[j])
+        };
+        if known == theirs {
+            corners[third] = candidate;
+            break;
+        }
+    }
+    if corners[third] == NO_INDEX {
+        return NO_INDEX;
+    }
+    // Gluing all three edges would close the chart: cut instead.
+    let glued = (0..3)
+        .filter(|&e| {
+            let (q, j) = across[e];
+            placed(q).is_some_and(|qc| {
+                let j = j as usize;
+                corners[e] == qc[(j + 1) % 3] && corners[(e + 1) % 3] == qc[j]
+            })
+        })
+        .count();
+    if glued == 3 { NO_INDEX } else { corners[third] }
 }
 
 /// Breadth-first hop counts from `seed` over the mesh's edges (NO_INDEX where unreachable).

@@ -219,8 +219,13 @@ fn stretch(mesh: &ChartMesh, tris: &[u32], uv: &[[Vec2; 3]], density: f32) -> (f
 
 /// Lowest and highest corner of a chart.
 fn bounds(uv: &[[Vec2; 3]]) -> (Vec2, Vec2) {
-    uv.iter()
-        .flatten()
+    point_bounds(uv.as_flattened())
+}
+
+/// Lowest and highest of `points`, per axis.
+fn point_bounds(points: &[Vec2]) -> (Vec2, Vec2) {
+    points
+        .iter()
         .fold((Vec2::INFINITY, Vec2::NEG_INFINITY), |(l, h), &p| {
             (l.min(p), h.max(p))
         })
@@ -229,46 +234,8 @@ fn bounds(uv: &[[Vec2; 3]]) -> (Vec2, Vec2) {
 /// The LSCM solution (module docs) for every chart vertex, from the unfolded positions.
 fn conformal_map(mesh: &ChartMesh, g: &Grown) -> Vec<Vec2> {
     let nv = g.uv.len();
-    // Per triangle and corner j: the edge opposite j in the triangle's own frame over
-    // 2√area, so that the residual is
-    //   r = Σ_j (−e_x U_j + e_y V_j,  −e_y U_j − e_x V_j)
-    // (rot90 ∇U − ∇V times √area; zero for a similarity).
-    let coeff: Vec<[Vec2; 3]> = g
-        .tris
-        .iter()
-        .map(|&t| {
-            let [a, b, c] = mesh.positions[t as usize];
-            let x = b - a;
-            let l = x.length();
-            let (px, py) = if l > 0.0 {
-                let along = (c - a).dot(x) / l;
-                (along, ((c - a) - x * (along / l)).length())
-            } else {
-                (0.0, 0.0)
-            };
-            let p = [Vec2::ZERO, Vec2::new(l, 0.0), Vec2::new(px, py)];
-            let area = 0.5 * l * py;
-            let w = if area > 0.0 { 0.5 / area.sqrt() } else { 0.0 };
-            [0, 1, 2].map(|j| (p[(j + 2) % 3] - p[(j + 1) % 3]) * w)
-        })
-        .collect();
+    let coeff = cauchy_riemann_coefficients(mesh, &g.tris);
     let corners = &g.corners;
-    // y = AᵀA x.
-    let apply = |x: &[Vec2], y: &mut [Vec2]| {
-        y.fill(Vec2::ZERO);
-        for (c, v) in coeff.iter().zip(corners) {
-            let (mut r1, mut r2) = (0.0, 0.0);
-            for j in 0..3 {
-                let (e, u) = (c[j], x[v[j] as usize]);
-                r1 += -e.x * u.x + e.y * u.y;
-                r2 += -e.y * u.x - e.x * u.y;
-            }
-            for j in 0..3 {
-                let e = c[j];
-                y[v[j] as usize] += Vec2::new(-e.x * r1 - e.y * r2, e.y * r1 - e.x * r2);
-            }
-        }
-    };
     let mut diag = vec![0.0f32; nv];
     for (c, v) in coeff.iter().zip(corners) {
         for j in 0..3 {
@@ -276,12 +243,8 @@ fn conformal_map(mesh: &ChartMesh, g: &Grown) -> Vec<Vec2> {
         }
     }
     // Pins: the extreme vertices along the unfolding's wider axis.
-    let mut x = g.uv.clone();
-    let (lo, hi) = x
-        .iter()
-        .fold((Vec2::INFINITY, Vec2::NEG_INFINITY), |(l, h), &p| {
-            (l.min(p), h.max(p))
-        });
+    let x = g.uv.clone();
+    let (lo, hi) = point_bounds(&x);
     let axis = usize::from(hi.y - lo.y > hi.x - lo.x);
     let key = |i: usize| x[i][axis];
     let p0 = (0..nv)
@@ -302,29 +265,86 @@ fn conformal_map(mesh: &ChartMesh, g: &Grown) -> Vec<Vec2> {
             }
         })
         .collect();
-    // Preconditioned conjugate gradients on AᵀA x = 0 with the pins fixed.
+    solve_pinned(&coeff, corners, &free, x)
+}
+
+/// Per triangle of `tris` and corner j: the edge opposite j in the triangle's own frame
+/// over 2√area, so that the residual is
+///   r = Σ_j (−e_x U_j + e_y V_j,  −e_y U_j − e_x V_j)
+/// (rot90 ∇U − ∇V times √area; zero for a similarity).
+fn cauchy_riemann_coefficients(mesh: &ChartMesh, tris: &[u32]) -> Vec<[Vec2; 3]> {
+    tris.iter()
+        .map(|&t| {
+            let [a, b, c] = mesh.positions[t as usize];
+            let x = b - a;
+            let l = x.length();
+            let (px, py) = if l > 0.0 {
+                let along = (c - a).dot(x) / l;
+                (along, ((c - a) - x * (along / l)).length())
+            } else {
+                (0.0, 0.0)
+            };
+            let p = [Vec2::ZERO, Vec2::new(l, 0.0), Vec2::new(px, py)];
+            let area = 0.5 * l * py;
+            let w = if area > 0.0 { 0.5 / area.sqrt() } else { 0.0 };
+            [0, 1, 2].map(|j| (p[(j + 2) % 3] - p[(j + 1) % 3]) * w)
+        })
+        .collect()
+}
+
+/// y = AᵀA x, A the residuals ([`cauchy_riemann_coefficients`] `coeff`) of the triangles
+/// with chart vertices `corners`.
+fn apply_normal_matrix(coeff: &[[Vec2; 3]], corners: &[[u32; 3]], x: &[Vec2], y: &mut [Vec2]) {
+    y.fill(Vec2::ZERO);
+    for (c, v) in coeff.iter().zip(corners) {
+        let (mut r1, mut r2) = (0.0, 0.0);
+        for j in 0..3 {
+            let (e, u) = (c[j], x[v[j] as usize]);
+            r1 += -e.x * u.x + e.y * u.y;
+            r2 += -e.y * u.x - e.x * u.y;
+        }
+        for j in 0..3 {
+            let e = c[j];
+            y[v[j] as usize] += Vec2::new(-e.x * r1 - e.y * r2, e.y * r1 - e.x * r2);
+        }
+    }
+}
+
+/// Σ_i a_i · b_i, summed in f64.
+fn inner_product(a: &[Vec2], b: &[Vec2]) -> f64 {
+    a.iter().zip(b).map(|(a, b)| a.dot(*b) as f64).sum::<f64>()
+}
+
+/// Preconditioned conjugate gradients on AᵀA x = 0 ([`apply_normal_matrix`]) from `x`,
+/// with the vertices whose Jacobi preconditioner `free` (1/diag AᵀA) is 0 fixed: the pins.
+fn solve_pinned(
+    coeff: &[[Vec2; 3]],
+    corners: &[[u32; 3]],
+    free: &[f32],
+    mut x: Vec<Vec2>,
+) -> Vec<Vec2> {
+    let nv = x.len();
     let mut r = vec![Vec2::ZERO; nv];
-    apply(&x, &mut r);
-    for (ri, &f) in r.iter_mut().zip(&free) {
+    apply_normal_matrix(coeff, corners, &x, &mut r);
+    for (ri, &f) in r.iter_mut().zip(free) {
         *ri = if f > 0.0 { -*ri } else { Vec2::ZERO };
     }
-    let mut z: Vec<Vec2> = r.iter().zip(&free).map(|(&ri, &f)| ri * f).collect();
+    let mut z: Vec<Vec2> = r.iter().zip(free).map(|(&ri, &f)| ri * f).collect();
     let mut p = z.clone();
     let mut q = vec![Vec2::ZERO; nv];
-    let dot = |a: &[Vec2], b: &[Vec2]| a.iter().zip(b).map(|(a, b)| a.dot(*b) as f64).sum::<f64>();
-    let mut rz = dot(&r, &z);
+    let mut rz = inner_product(&r, &z);
     let target = rz * (CG_TOLERANCE as f64).powi(2);
     for _ in 0..CG_ITERATIONS {
         if !(rz > target && rz > 0.0) {
             break;
         }
-        apply(&p, &mut q);
-        for (qi, &f) in q.iter_mut().zip(&free) {
+        apply_normal_matrix(coeff, corners, &p, &mut q);
+        for (qi, &f) in q.iter_mut().zip(free) {
             if f == 0.0 {
                 *qi = Vec2::ZERO;
             }
         }
-        let pq = dot(&p, &q);
+        let pq = inner_product(&p, &q);
         if pq.is_nan() || pq <= 0.0 {
             break;
         }
@@ -334,7 +354,7 @@ fn conformal_map(mesh: &ChartMesh, g: &Grown) -> Vec<Vec2> {
             r[i] -= q[i] * alpha;
             z[i] = r[i] * free[i];
         }
-        let rz_new = dot(&r, &z);
+        let rz_new = inner_product(&r, &z);
         let beta = (rz_new / rz) as f32;
         rz = rz_new;
         for i in 0..nv {

@@ -7,7 +7,7 @@ use crate::{
     scene_args::{EnvArgs, LoadedWorld},
 };
 use anyhow::{Result, bail};
-use serde_json::json;
+use serde_json::{Value, json};
 use std::{
     path::PathBuf,
     sync::{
@@ -16,11 +16,12 @@ use std::{
     },
 };
 use surfcache_cache::{
-    Method, SurfaceCache,
+    CacheStats, Method, SurfaceCache,
     archive::BakeArchive,
-    bake::{DEFAULT_GATHER_PASSES, FLOOR_FRACTION},
+    bake::{BakeSettings, DEFAULT_GATHER_PASSES, FLOOR_FRACTION},
 };
 use surfcache_io::Untrusted;
+use surfcache_trace::TracedScene;
 
 /// `surfcache bake` options (docs/cli.md, plus the project's own).
 #[derive(clap::Args)]
@@ -98,35 +99,9 @@ pub struct BakeArgs {
 }
 
 pub fn run(args: BakeArgs) -> Result<()> {
-    let method = match &args.method {
-        None => Method::default(),
-        Some(m) => parse_method(m)?,
-    };
-    let sampler = parse_sampler(&args.sampler)?;
-    let both_sides = match args.sides.as_str() {
-        "both" => true,
-        "front" => false,
-        other => bail!("unknown --sides '{other}' (known: both, front)"),
-    };
-    let options = BakeOptions {
-        method,
-        sampler,
-        max_rel_error: args.max_rel_error,
-        min_samples: args.min_samples,
-        max_samples: args.max_samples,
-        samples: args.samples,
-        bounces: args.bounces,
-        seed: args.seed,
-        density: args.density,
-        interpolation_error: args.interpolation_error,
-        gather: args.gather,
-        both_sides,
-        share_corners: !args.no_share_corners,
-        filter_passes: args.filter_passes,
-        guiding: !args.no_guiding,
-    };
+    let options = args.options()?;
     let settings = options.settings()?;
-    let (min_samples, max_samples) = (
+    let sample_range = (
         settings.estimator.min_samples,
         settings.estimator.max_samples,
     );
@@ -134,21 +109,8 @@ pub fn run(args: BakeArgs) -> Result<()> {
 
     let mut loaded = LoadedWorld::load(&args.scene, &args.env)?;
     let scene = loaded.traced()?;
-    let cancel = Arc::new(AtomicBool::new(false));
-    {
-        let cancel = cancel.clone();
-        // A second handler cannot be installed (e.g. in tests); cancelling then falls back
-        // to the default signal behaviour, which still leaves only the staging directory.
-        let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::SeqCst));
-    }
-    let threads = args.threads;
-    let Some(Baked {
-        cache,
-        textures,
-        progress,
-        settings,
-        seconds: bake_seconds,
-    }) = baking::bake(&mut loaded, settings, threads, &|_, _| {
+    let cancel = cancel_on_ctrl_c();
+    let Some(baked) = baking::bake(&mut loaded, settings, args.threads, &|_, _| {
         cancel.load(Ordering::SeqCst)
     })?
     else {
@@ -157,21 +119,105 @@ pub fn run(args: BakeArgs) -> Result<()> {
             Untrusted::path(&args.out)
         );
     };
-    let floor = settings.estimator.floor;
-    let mean = floor / FLOOR_FRACTION;
-    let stats = cache.stats();
+    let stats = baked.cache.stats();
 
     // Outputs: archive for `query`, textures, the scene with UV1, the report.
-    let lightmaps = bake_dir::write_lightmaps(&staging, &loaded, &scene, &textures)?;
-    let archive = BakeArchive::new(&scene, cache);
+    let lightmaps = bake_dir::write_lightmaps(&staging, &loaded, &scene, &baked.textures)?;
+    let settings = settings_report(&args, &options, sample_range, &baked.settings);
+    let report = bake_report(
+        &loaded,
+        &scene,
+        &baked,
+        &stats,
+        options.method,
+        lightmaps,
+        settings,
+    );
+    let archive = BakeArchive::new(&scene, baked.cache);
     staging.write("cache.bin", &archive.to_bytes())?;
-    let report = json!({
+    staging.write(
+        "report.json",
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
+    staging.commit()?;
+    eprintln!(
+        "baked {} ({}) in {:.1} s: {} sample points, {} bytes -> {}",
+        loaded.name,
+        options.method.name(),
+        baked.seconds,
+        stats.sample_points,
+        stats.cache_bytes,
+        Untrusted::path(&args.out)
+    );
+    Ok(())
+}
+
+impl BakeArgs {
+    /// The bake options these arguments ask for (method, sampler and sides parsed).
+    fn options(&self) -> Result<BakeOptions> {
+        let method = match &self.method {
+            None => Method::default(),
+            Some(m) => parse_method(m)?,
+        };
+        let sampler = parse_sampler(&self.sampler)?;
+        let both_sides = match self.sides.as_str() {
+            "both" => true,
+            "front" => false,
+            other => bail!("unknown --sides '{other}' (known: both, front)"),
+        };
+        Ok(BakeOptions {
+            method,
+            sampler,
+            max_rel_error: self.max_rel_error,
+            min_samples: self.min_samples,
+            max_samples: self.max_samples,
+            samples: self.samples,
+            bounces: self.bounces,
+            seed: self.seed,
+            density: self.density,
+            interpolation_error: self.interpolation_error,
+            gather: self.gather,
+            both_sides,
+            share_corners: !self.no_share_corners,
+            filter_passes: self.filter_passes,
+            guiding: !self.no_guiding,
+        })
+    }
+}
+
+/// A flag that Ctrl-C raises, for the bake to stop at.
+fn cancel_on_ctrl_c() -> Arc<AtomicBool> {
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let cancel = cancel.clone();
+        // A second handler cannot be installed (e.g. in tests); cancelling then falls back
+        // to the default signal behaviour, which still leaves only the staging directory.
+        let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::SeqCst));
+    }
+    cancel
+}
+
+/// The `report.json` of a bake: the cache's figures, the bake's progress and timing, the
+/// lightmaps written and the `settings` object ([`settings_report`]).
+fn bake_report(
+    loaded: &LoadedWorld,
+    scene: &TracedScene,
+    baked: &Baked,
+    stats: &CacheStats,
+    method: Method,
+    lightmaps: Value,
+    settings: Value,
+) -> Value {
+    let floor = baked.settings.estimator.floor;
+    let mean = floor / FLOOR_FRACTION;
+    let progress = &baked.progress;
+    json!({
         "scene": loaded.name,
         "method": method.name(),
         "triangles": scene.triangle_count(),
         "sample_points": stats.sample_points,
         "rays_traced": progress.rays,
-        "bake_seconds": bake_seconds,
+        "bake_seconds": baked.seconds,
         "cache_bytes": stats.cache_bytes,
         "samples": stats.samples,
         "mean_samples_per_point": stats.samples as f64 / stats.sample_points.max(1) as f64,
@@ -185,38 +231,34 @@ pub fn run(args: BakeArgs) -> Result<()> {
         "scene_mean_irradiance": mean,
         "relative_error_floor": floor,
         "lightmaps": lightmaps,
-        "settings": {
-            "scene": args.scene,
-            "env": args.env.env.as_ref().map(|p| p.display().to_string()),
-            "env_color": args.env.env_color.map(|c| c.to_array()),
-            "env_intensity": args.env.env_intensity,
-            "method": method.name(),
-            "max_rel_error": args.max_rel_error,
-            "min_samples": min_samples,
-            "max_samples": max_samples,
-            "samples": args.samples,
-            "bounces": args.bounces,
-            "seed": args.seed,
-            "threads": threads.unwrap_or_else(rayon::current_num_threads),
-            "sampler": sampler.name(),
-            "sides": args.sides,
-            "gather": args.gather,
-            "cache": settings.cache,
-        },
-    });
-    staging.write(
-        "report.json",
-        serde_json::to_string_pretty(&report)?.as_bytes(),
-    )?;
-    staging.commit()?;
-    eprintln!(
-        "baked {} ({}) in {:.1} s: {} sample points, {} bytes -> {}",
-        loaded.name,
-        method.name(),
-        bake_seconds,
-        stats.sample_points,
-        stats.cache_bytes,
-        Untrusted::path(&args.out)
-    );
-    Ok(())
+        "settings": settings,
+    })
+}
+
+/// The `settings` object of `report.json`: the options as given, the sample range
+/// (`min_samples`, `max_samples`) they resolved to and the cache settings `baked` used.
+fn settings_report(
+    args: &BakeArgs,
+    options: &BakeOptions,
+    (min_samples, max_samples): (u32, u32),
+    baked: &BakeSettings,
+) -> Value {
+    json!({
+        "scene": args.scene,
+        "env": args.env.env.as_ref().map(|p| p.display().to_string()),
+        "env_color": args.env.env_color.map(|c| c.to_array()),
+        "env_intensity": args.env.env_intensity,
+        "method": options.method.name(),
+        "max_rel_error": args.max_rel_error,
+        "min_samples": min_samples,
+        "max_samples": max_samples,
+        "samples": args.samples,
+        "bounces": args.bounces,
+        "seed": args.seed,
+        "threads": args.threads.unwrap_or_else(rayon::current_num_threads),
+        "sampler": options.sampler.name(),
+        "sides": args.sides,
+        "gather": args.gather,
+        "cache": baked.cache,
+    })
 }

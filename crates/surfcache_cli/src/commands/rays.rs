@@ -85,7 +85,7 @@ pub fn run(args: RaysArgs) -> Result<()> {
 }
 
 /// Bounding box of the triangles' corners.
-fn bounds(positions: &[[Vec3; 3]]) -> (Vec3, Vec3) {
+pub(super) fn bounds(positions: &[[Vec3; 3]]) -> (Vec3, Vec3) {
     positions.iter().flatten().fold(
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),

@@ -2,6 +2,7 @@
 //! for comparison, or the thesis' diagnostic pictures (samples per point, irradiance-map
 //! order per triangle).
 
+use super::rays::bounds;
 use crate::{
     bake_dir::read_archive_of,
     camera::{Camera, default_view},
@@ -13,7 +14,7 @@ use glam::{Vec2, Vec3};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::path::PathBuf;
-use surfcache_cache::{PublishedLookup, SurfaceCache};
+use surfcache_cache::{Diagnostic, PublishedLookup, SurfaceCache};
 use surfcache_trace::{EstimatorSettings, Hit, PointInScene, Sampler, TracedScene, estimate};
 
 #[derive(clap::Args)]
@@ -64,28 +65,14 @@ const SUBPIXELS: u32 = 2;
 
 pub fn run(args: RenderArgs) -> Result<()> {
     let (width, height) = parse_size(&args.size)?;
-    if args.cache.is_some() == args.reference.is_some() {
-        bail!("give exactly one of --cache OUT_DIR and --reference N");
-    }
-    if (args.show.is_some() || args.published) && args.cache.is_none() {
-        bail!("--show and --published need --cache");
-    }
-    if let Some(show) = &args.show
-        && show != "samples"
-        && show != "order"
-    {
-        bail!("unknown --show '{show}' (known: samples, order)");
-    }
+    check_modes(&args)?;
     let loaded = LoadedWorld::load(&args.scene, &args.env)?;
     let scene = loaded.traced()?;
     let archive = match &args.cache {
         Some(dir) => Some(read_archive_of(dir, &scene, &args.scene)?),
         None => None,
     };
-    let (lo, hi) = scene.positions().iter().flatten().fold(
-        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
+    let (lo, hi) = bounds(scene.positions());
     let camera = Camera::from_arg(
         args.camera.as_deref(),
         args.fov,
@@ -109,14 +96,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let shade = |hit: &Hit, d: Vec3, key: u64| -> Vec3 {
         let front = scene.geometric_normals()[hit.triangle as usize].dot(d) < 0.0;
         if let (Some(kind), Some(a)) = (show, &archive) {
-            let diag = a.cache.diagnostic(hit.triangle, hit.uv, front);
-            return match kind {
-                "order" => match diag.order {
-                    Some(o) => heat((o.max(1) as f32).log2() / 7.0),
-                    None => Vec3::splat(0.2),
-                },
-                _ => heat((diag.samples.max(1) as f32).log2() / 18.0),
-            };
+            return diagnostic_colour(a.cache.diagnostic(hit.triangle, hit.uv, front), kind);
         }
         let e = match (&archive, &reference) {
             (Some(a), _) => match &published {
@@ -124,15 +104,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
                 None => a.cache.lookup(hit.triangle, hit.uv, front),
             },
             (None, Some(settings)) => {
-                let p = scene.hit_point(hit, d);
-                let origin = scene.spawn_origin(&p);
-                estimate(
-                    &PointInScene::new(&scene, p, origin),
-                    settings,
-                    args.seed,
-                    key,
-                )
-                .value
+                reference_irradiance(&scene, hit, d, settings, args.seed, key)
             }
             (None, None) => Vec3::ZERO,
         };
@@ -150,15 +122,66 @@ pub fn run(args: RenderArgs) -> Result<()> {
         )
     })?;
     bar.finish_and_clear();
-    let exposure = match (args.exposure, show) {
+    write_picture(&args, width, height, &pixels)
+}
+
+/// Checks that the arguments name exactly one source of irradiance (--cache or
+/// --reference) and that --show and --published come with --cache.
+fn check_modes(args: &RenderArgs) -> Result<()> {
+    if args.cache.is_some() == args.reference.is_some() {
+        bail!("give exactly one of --cache OUT_DIR and --reference N");
+    }
+    if (args.show.is_some() || args.published) && args.cache.is_none() {
+        bail!("--show and --published need --cache");
+    }
+    if let Some(show) = &args.show
+        && show != "samples"
+        && show != "order"
+    {
+        bail!("unknown --show '{show}' (known: samples, order)");
+    }
+    Ok(())
+}
+
+/// The colour of a diagnostic picture (`--show order` or `samples`) at a point: its
+/// irradiance-map order (grey without one) or sample count, on a log-scale heat map.
+fn diagnostic_colour(diag: Diagnostic, kind: &str) -> Vec3 {
+    match kind {
+        "order" => match diag.order {
+            Some(o) => heat((o.max(1) as f32).log2() / 7.0),
+            None => Vec3::splat(0.2),
+        },
+        _ => heat((diag.samples.max(1) as f32).log2() / 18.0),
+    }
+}
+
+/// Path-traced irradiance E at a primary hit (direction `d` from the camera), with the
+/// sample sequence of `seed` and the sub-pixel `key`.
+fn reference_irradiance(
+    scene: &TracedScene,
+    hit: &Hit,
+    d: Vec3,
+    settings: &EstimatorSettings,
+    seed: u64,
+    key: u64,
+) -> Vec3 {
+    let p = scene.hit_point(hit, d);
+    let origin = scene.spawn_origin(&p);
+    estimate(&PointInScene::new(scene, p, origin), settings, seed, key).value
+}
+
+/// Writes the picture tone-mapped to the output PNG (exposure 1 for diagnostic pictures,
+/// else --exposure or automatic) and, when shaded, its linear radiance beside it as .exr.
+fn write_picture(args: &RenderArgs, width: u32, height: u32, pixels: &[Vec3]) -> Result<()> {
+    let exposure = match (args.exposure, args.show.as_deref()) {
         (_, Some(_)) => 1.0,
         (Some(e), None) => e,
-        (None, None) => auto_exposure(&pixels),
+        (None, None) => auto_exposure(pixels),
     };
-    write_png(&args.output, width, height, &pixels, exposure)?;
-    if show.is_none() {
+    write_png(&args.output, width, height, pixels, exposure)?;
+    if args.show.is_none() {
         let exr = args.output.with_extension("exr");
-        surfcache_io::write_rgb_exr(&exr, width, height, &pixels)?;
+        surfcache_io::write_rgb_exr(&exr, width, height, pixels)?;
     }
     eprintln!("wrote {} (exposure {exposure:.3})", args.output.display());
     Ok(())
