@@ -113,10 +113,11 @@ pub fn apply_lightmaps(
         };
         let source = LightmappedMesh::source_of(state.as_deref(), &drawn.0);
         let kept = state.as_ref().and_then(|s| s.uv1_mesh.clone());
+        if !meshes.contains(&source) {
+            continue;
+        }
         let uv1_mesh = match uv1_mesh_for(&mut meshes, &source, kept, texture) {
-            Ok(Some(uv1_mesh)) => uv1_mesh,
-            // The source mesh is not loaded.
-            Ok(None) => continue,
+            Ok(uv1_mesh) => uv1_mesh,
             Err(e) => {
                 warn!("surfcache: no lightmap for {entity}: {e}");
                 continue;
@@ -155,38 +156,35 @@ pub fn apply_lightmaps(
     }
 }
 
-/// The UV1 copy of `source` an entity draws with `texture`: none (`Some(None)`) when the
-/// source's own UV1 is the layout, else `kept` (the entity's copy) when it carries this
-/// layout, else a new copy, written over `kept` where that still exists. `None` while
-/// `source` is not loaded.
+/// The UV1 copy of `source` an entity draws with `texture`: none when the source's own
+/// UV1 is the layout, else `kept` (the entity's copy) when it carries this layout, else a
+/// new copy, written over `kept` where that still exists.
 fn uv1_mesh_for(
     meshes: &mut Assets<Mesh>,
     source: &Handle<Mesh>,
     kept: Option<Handle<Mesh>>,
     texture: &IrradianceTexture,
-) -> Result<Option<Option<Handle<Mesh>>>, String> {
-    let Some(source_mesh) = meshes.get(source) else {
+) -> Result<Option<Handle<Mesh>>, String> {
+    let source = meshes.get(source).ok_or("its mesh is not loaded")?;
+    if has_uv1(source, &texture.uv1) {
         return Ok(None);
-    };
-    if has_uv1(source_mesh, &texture.uv1) {
-        return Ok(Some(None));
     }
     if kept
         .as_ref()
         .and_then(|h| meshes.get(h))
         .is_some_and(|m| has_uv1(m, &texture.uv1))
     {
-        return Ok(Some(kept));
+        return Ok(kept);
     }
-    let copy = with_lightmap_uv1(source_mesh, &texture.uv1)?;
+    let copy = with_lightmap_uv1(source, &texture.uv1)?;
     match kept {
         Some(h) if meshes.contains(&h) => {
             if let Some(mut m) = meshes.get_mut(&h) {
                 *m = copy;
             }
-            Ok(Some(Some(h)))
+            Ok(Some(h))
         }
-        _ => Ok(Some(Some(meshes.add(copy)))),
+        _ => Ok(Some(meshes.add(copy))),
     }
 }
 
