@@ -72,7 +72,7 @@ fn bake_options_that_do_not_apply_to_the_method() {
     let density = "--density applies to --method irradiance-map and lightmap only";
     let interpolation = "--interpolation-error applies to --method irradiance-map only";
     let share = "--no-share-corners applies to --method irradiance-map only";
-    let filter = "--filter-passes applies to --method lightmap only";
+    let filter = "--filter-passes applies to --method lightmap and irradiance-map only";
     let guiding = "--no-guiding applies to --method lightmap only";
     let cases: [(&[&str], &str); 9] = [
         (&["--method", "vertex", "--density", "8"], density),
@@ -86,10 +86,7 @@ fn bake_options_that_do_not_apply_to_the_method() {
         (&["--interpolation-error", "0.1"], interpolation),
         (&["--method", "vertex", "--no-share-corners"], share),
         (&["--method", "lightmap", "--no-share-corners"], share),
-        (
-            &["--method", "irradiance-map", "--filter-passes", "2"],
-            filter,
-        ),
+        (&["--method", "vertex", "--filter-passes", "2"], filter),
         (&["--method", "vertex", "--no-guiding"], guiding),
         (&["--method", "irradiance-map", "--no-guiding"], guiding),
     ];

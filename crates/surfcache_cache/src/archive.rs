@@ -8,7 +8,7 @@ use surfcache_core::{Instance, Material, Mesh, Scene};
 use surfcache_trace::TracedScene;
 
 /// Identifies the format; bumped whenever the layout changes.
-pub const ARCHIVE_MAGIC: [u8; 8] = *b"SCACHE05";
+pub const ARCHIVE_MAGIC: [u8; 8] = *b"SCACHE06";
 
 /// Why an archive could not be read.
 #[derive(Debug, thiserror::Error)]

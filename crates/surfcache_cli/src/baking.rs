@@ -171,13 +171,14 @@ impl BakeOptions {
             maps.interpolation_error = e;
         }
         if let Some(n) = self.filter_passes {
-            let CacheSettings::Lightmap(lightmap) = &mut cache else {
-                bail!("--filter-passes applies to --method lightmap only");
-            };
             if n > MAX_FILTER_PASSES {
                 bail!("--filter-passes takes at most {MAX_FILTER_PASSES} passes");
             }
-            lightmap.filter.iterations = n;
+            match &mut cache {
+                CacheSettings::Lightmap(lightmap) => lightmap.filter.iterations = n,
+                CacheSettings::IrradianceMap(maps) => maps.filter.iterations = n,
+                _ => bail!("--filter-passes applies to --method lightmap and irradiance-map only"),
+            }
         }
         if !self.guiding {
             let CacheSettings::Lightmap(lightmap) = &mut cache else {

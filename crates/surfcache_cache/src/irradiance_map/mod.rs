@@ -93,6 +93,17 @@
 //! sample up to a spacing away, and no light is carried across the crossing. The
 //! published textures cannot show either (an engine's filter knows no crossings).
 //!
+//! **Filtering** (the thesis' outlook: sharing samples). Once no grid refines any more,
+//! every valid estimate is filtered with its neighbours in space
+//! ([`crate::filter::filter_points`], [`IrradianceMapSettings::filter`]): each estimate
+//! once however many corners share it, with the spacing of its grid's order (at most one
+//! sample spacing of the density), a weighted mean at the largest of three scales whose
+//! value the smaller ones agree with. Samples with a crossing line keep their own estimates; the
+//! other samples of crossed grids share only with neighbours an any-hit ray finds
+//! nothing between. The refinement test before saw each sample's own estimate.
+//! Estimates without samples (a re-bake's kept priors, filtered when they were made) are
+//! taps but keep their values.
+//!
 //! **Storage.** Samples are three half floats (6 bytes, [`crate::stored_rgb`], one
 //! [`StoreScale`] chosen from the largest
 //! stored value), grid by grid; a grid slot `2·triangle + side` (side 0 = front) has a
@@ -130,10 +141,12 @@
 //! ```
 //!
 //! The parts: [`grid`] (one barycentric grid), [`settings`], [`sharing`] (shared
-//! corners), [`forced_refinement`] (shadow probes and crossed grids), [`working`] (the
-//! state of a bake in progress), [`rounds`] (the points of each round and what its
-//! estimates change) and [`refinement`] (burial fill and the refinement test).
+//! corners), [`filtering`] (sharing samples between neighbours), [`forced_refinement`]
+//! (shadow probes and crossed grids), [`working`] (the state of a bake in progress),
+//! [`rounds`] (the points of each round and what its estimates change) and
+//! [`refinement`] (burial fill and the refinement test).
 
+mod filtering;
 mod forced_refinement;
 mod grid;
 mod refinement;
@@ -304,7 +317,7 @@ impl SurfaceCache for IrradianceMaps {
     /// buried samples, decides which grids double again, and packs.
     fn finish_round(
         &mut self,
-        _scene: &TracedScene,
+        scene: &TracedScene,
         points: &[SamplePoint],
         estimates: &[Estimate],
     ) {
@@ -335,6 +348,11 @@ impl SurfaceCache for IrradianceMaps {
         self.fill_buried(&mut w, total);
         self.buried = w.burial.iter().filter(|&&b| b != Burial::Valid).count() as u64;
         self.decide_refinement(&mut w);
+        if !w.refine.contains(&true) {
+            // The grids are final: share samples between neighbours, then refill.
+            self.share_samples(scene, &mut w);
+            self.fill_buried(&mut w, total);
+        }
         w.end_round();
         self.pack(&w);
         self.working = Some(w);

@@ -211,6 +211,7 @@ impl Working {
         let mut std_error = vec![Vec3::ZERO; total];
         let mut burial = vec![Burial::Valid; total];
         let mut line_of = vec![NO_INDEX; total];
+        let mut estimate_id = vec![NO_INDEX; total];
         for g in 0..slots {
             let (old, new) = (order_of_level(levels[g]), order_of_level(new_levels[g]));
             if old == 0 {
@@ -224,6 +225,7 @@ impl Working {
                 std_error[to..to + s].copy_from_slice(&self.std_error[from..from + s]);
                 burial[to..to + s].copy_from_slice(&self.burial[from..from + s]);
                 line_of[to..to + s].copy_from_slice(&self.line_of[from..from + s]);
+                estimate_id[to..to + s].copy_from_slice(&self.estimate_id[from..from + s]);
             } else {
                 for d in 0..=old {
                     for j in 0..=d {
@@ -233,6 +235,7 @@ impl Working {
                         samples[b] = self.samples[a];
                         std_error[b] = self.std_error[a];
                         line_of[b] = self.line_of[a];
+                        estimate_id[b] = self.estimate_id[a];
                         burial[b] = if self.burial[a] == Burial::Valid {
                             Burial::Valid
                         } else {
@@ -247,6 +250,7 @@ impl Working {
         self.std_error = std_error;
         self.burial = burial;
         self.line_of = line_of;
+        self.estimate_id = estimate_id;
     }
 
     /// Stores the round's estimates as the new samples of the pending grids (now of
@@ -268,6 +272,7 @@ impl Working {
             let base = offsets[g as usize] as usize;
             for_each_new_sample(coarse, n, |_, _, m| {
                 let e = &estimates[self.sources[next] as usize];
+                self.estimate_id[base + m] = self.estimates_seen + self.sources[next];
                 self.line_of[base + m] = self.round_lines[next];
                 next += 1;
                 self.raw[base + m] = e.value;
@@ -280,6 +285,7 @@ impl Working {
                 };
             });
         }
+        self.estimates_seen += estimates.len() as u32;
     }
 
     /// Clears what only the round that just finished needs; priors serve the first

@@ -2,7 +2,7 @@
 //! of the estimates they received.
 
 use super::MAX_ORDER_LIMIT;
-use crate::CacheStats;
+use crate::{CacheStats, filter::FilterSettings};
 use serde::{Deserialize, Serialize};
 use surfcache_core::geometry::longest_edge;
 use surfcache_trace::{Estimate, TracedScene};
@@ -43,6 +43,11 @@ pub struct IrradianceMapSettings {
     /// share a corner (module docs, Shared corners). Default 10.
     #[serde(default = "default_share_angle")]
     pub share_angle: f32,
+    /// Sharing samples between neighbouring grid samples once the grids stop refining
+    /// (module docs, Filtering; [`crate::filter::filter_points`]). Default: one pass;
+    /// `iterations: 0` keeps every estimate on its own.
+    #[serde(default)]
+    pub filter: FilterSettings,
 }
 
 fn default_share_corners() -> bool {
@@ -65,6 +70,7 @@ impl Default for IrradianceMapSettings {
             floor: 0.0,
             share_corners: default_share_corners(),
             share_angle: default_share_angle(),
+            filter: FilterSettings::default(),
         }
     }
 }

@@ -50,6 +50,11 @@ pub(super) struct Working {
     /// Per new grid sample of the current round, in [`for_each_new_sample`] order over
     /// `pending`: the round point whose estimate it takes.
     pub(super) sources: Vec<u32>,
+    /// Per sample: which estimate it holds, numbered over all rounds (copies of a shared
+    /// corner hold the same one), or [`NO_INDEX`] before it has one.
+    pub(super) estimate_id: Vec<u32>,
+    /// Estimates received so far, over all rounds.
+    pub(super) estimates_seen: u32,
     /// Re-bakes: values of the maps before an edit, grid by grid, for the first round
     /// ([`SamplePoint::prior`]); `prior_offsets[g]` is grid slot g's first, or
     /// [`NO_INDEX`] for a grid without one.

@@ -84,9 +84,9 @@ pub struct BakeArgs {
     /// the triangles around a vertex that may share them.
     #[arg(long)]
     no_share_corners: bool,
-    /// Lightmaps: à-trous passes of the filter that shares samples between neighbouring
-    /// texels (docs/design.md, Filtering); 0 estimates every texel on its own
-    /// [default: 1].
+    /// Lightmaps and irradiance maps: passes of the filter that shares samples between
+    /// neighbouring texels or grid samples (docs/design.md, Filtering); 0 keeps every
+    /// estimate on its own [default: 1].
     #[arg(long)]
     filter_passes: Option<u32>,
     /// Lightmaps: draw every texel's directions cosine-weighted instead of through the

@@ -31,10 +31,16 @@
 //! optimistic is the weights' dependence on the noise they average (taps near a texel's own
 //! value weigh more): on pure noise the claim is about 1.5× below the output's variance.
 //! The bias the filter adds is measured, not modelled (docs/results.md).
+//!
+//! [`filter_points`] applies the same weights to scattered points (irradiance-map grid
+//! samples), finding neighbours in space ([`points`]).
 
 use glam::Vec3;
 use rayon::prelude::*;
 use surfcache_core::color::luminance;
+
+mod points;
+pub use points::{PointFilterInput, filter_points};
 
 /// Taps whose normals are less parallel than this are never mixed.
 pub const MIN_NORMAL_COS: f32 = 0.9;
@@ -173,6 +179,46 @@ pub fn correlation_gain(k: u32) -> f32 {
     ((ratios[1] / ratios[0]).powi(2)) as f32
 }
 
+/// The texel or point a tap sum is for, as the edge-stopping functions see it.
+struct Centre {
+    position: Vec3,
+    normal: Vec3,
+    /// Luminance of its value and of its variance.
+    luminance: f32,
+    variance: f32,
+    /// 1 / (σ_x · spacing): the plane distance's scale.
+    plane_scale: f32,
+}
+
+impl Centre {
+    /// The weight of a tap at `position` with `normal`, `value` and `variance`: its
+    /// spatial `kernel` weight times the edge-stopping functions (module docs: normal,
+    /// plane distance, value); 0 for a tap whose normal is less parallel than
+    /// [`MIN_NORMAL_COS`].
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    fn weight(
+        &self,
+        settings: &FilterSettings,
+        kernel: f32,
+        floor: f32,
+        position: Vec3,
+        normal: Vec3,
+        value: Vec3,
+        variance: Vec3,
+    ) -> f32 {
+        let cos = self.normal.dot(normal);
+        if cos < MIN_NORMAL_COS {
+            return 0.0;
+        }
+        let plane = self.normal.dot(position - self.position) * self.plane_scale;
+        let sigma = settings.sigma_value * (self.variance + luminance(variance)).max(0.0).sqrt();
+        let dv =
+            (self.luminance - luminance(value)).abs() / (sigma + 1e-3 * floor + f32::MIN_POSITIVE);
+        kernel * cos.powf(settings.sigma_normal) * (-plane * plane - dv).exp()
+    }
+}
+
 /// One à-trous tap sum at texel (x, y) for `pass` (module docs); the pass' correlation
 /// gain applies in full where the texel shares as many taps as an unconstrained pass and
 /// not at all where it shares none.
@@ -189,10 +235,13 @@ fn filter_texel(
     let step = pass.step;
     let (w, h) = (input.width as isize, input.height as isize);
     let p = y * input.width + x;
-    let (xp, np) = (input.position[p], input.normal[p]);
-    let lp = luminance(value[p]);
-    let sp = luminance(variance[p]);
-    let plane_scale = 1.0 / (settings.sigma_plane * input.texel);
+    let centre = Centre {
+        position: input.position[p],
+        normal: input.normal[p],
+        luminance: luminance(value[p]),
+        variance: luminance(variance[p]),
+        plane_scale: 1.0 / (settings.sigma_plane * input.texel),
+    };
     let (mut sum_w, mut sum_w2, mut sum_v, mut sum_s) = (0.0f32, 0.0f32, Vec3::ZERO, Vec3::ZERO);
     for (j, hj) in B3.iter().enumerate() {
         let qy = y as isize + (j as isize - 2) * step;
@@ -211,23 +260,26 @@ fn filter_texel(
                 if !input.valid[q] {
                     continue;
                 }
-                let cos = np.dot(input.normal[q]);
-                if cos < MIN_NORMAL_COS {
-                    continue;
-                }
-                let d = input.position[q] - xp;
                 let reach = ((i as isize - 2).abs().max((j as isize - 2).abs()) * step) as f32
                     * std::f32::consts::SQRT_2
                     * MAX_STRETCH
                     * input.texel;
-                if d.length_squared() > reach * reach {
+                if (input.position[q] - centre.position).length_squared() > reach * reach {
                     continue;
                 }
-                let plane = np.dot(d) * plane_scale;
-                let lq = luminance(value[q]);
-                let sigma = settings.sigma_value * (sp + luminance(variance[q])).max(0.0).sqrt();
-                let dv = (lp - lq).abs() / (sigma + 1e-3 * input.floor + f32::MIN_POSITIVE);
-                hi * hj * cos.powf(settings.sigma_normal) * (-plane * plane - dv).exp()
+                let weight = centre.weight(
+                    settings,
+                    hi * hj,
+                    input.floor,
+                    input.position[q],
+                    input.normal[q],
+                    value[q],
+                    variance[q],
+                );
+                if weight == 0.0 {
+                    continue;
+                }
+                weight
             };
             sum_w += weight;
             sum_w2 += weight * weight;
@@ -236,17 +288,25 @@ fn filter_texel(
         }
     }
     // Effective taps (Σw)²/Σw² against the unconstrained pass' 1/(Σh²)².
-    let taps = sum_w * sum_w / sum_w2;
-    let share = ((taps - 1.0) / (pass.full_taps - 1.0)).clamp(0.0, 1.0);
-    let gain = 1.0 + (pass.gain - 1.0) * share;
+    let gain = shared_gain(sum_w * sum_w / sum_w2, pass.full_taps, pass.gain);
     (sum_v / sum_w, gain * sum_s / (sum_w * sum_w))
+}
+
+/// The correlation gain that a texel or point with `taps` effective taps, `(Σw)²/Σw²`,
+/// takes from a pass of correlation gain `gain` whose unconstrained kernel has
+/// `full_taps`: all of it where it shares as many taps, none where it shares none.
+#[inline]
+fn shared_gain(taps: f32, full_taps: f32, gain: f32) -> f32 {
+    let share = ((taps - 1.0) / (full_taps - 1.0)).clamp(0.0, 1.0);
+    1.0 + (gain - 1.0) * share
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn plane(w: usize, h: usize) -> (Vec<Vec3>, Vec<Vec3>) {
+    /// A `w × h` lattice of points 0.1 apart on the plane y = 0, facing +Y.
+    pub(super) fn plane(w: usize, h: usize) -> (Vec<Vec3>, Vec<Vec3>) {
         let pos = (0..w * h)
             .map(|k| Vec3::new((k % w) as f32, 0.0, (k / w) as f32) * 0.1)
             .collect();

@@ -1,0 +1,117 @@
+//! Sharing samples between neighbouring grid samples once the grids stop refining (the
+//! module docs of [`super`], Filtering).
+
+use super::{
+    IrradianceMaps, Working,
+    grid::{grid_index, order_of_level},
+};
+use crate::{
+    burial::Burial,
+    filter::{PointFilterInput, filter_points},
+};
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use surfcache_core::{geometry::longest_edge, index::NO_INDEX};
+use surfcache_trace::TracedScene;
+
+/// Where one estimate lies: its first sample's grid (triangle, side) and barycentrics,
+/// and the spacing of that grid.
+struct Node {
+    triangle: u32,
+    uv: Vec2,
+    front: bool,
+    spacing: f32,
+    /// On a grid another surface crosses.
+    guarded: bool,
+}
+
+impl IrradianceMaps {
+    /// Filters the valid estimates with their neighbours in space ([`filter_points`]),
+    /// each estimate once however many grids share it, its spacing that of its grid's
+    /// order (at most one sample spacing of the density); replaces `raw` and `std_error`
+    /// of their samples. Samples with a crossing line keep their own estimates and lend
+    /// them to nobody; the other samples of crossed grids share only with neighbours
+    /// that nothing separates from them (an any-hit ray between the two ray origins).
+    /// Estimates without samples (a re-bake's priors, filtered when they were made) are
+    /// taps, not filtered.
+    pub(super) fn share_samples(&self, scene: &TracedScene, w: &mut Working) {
+        if self.settings.filter.iterations == 0 {
+            return;
+        }
+        let cap = 1.0 / self.settings.density.max(f32::MIN_POSITIVE);
+        let mut node_of = vec![NO_INDEX; w.estimates_seen as usize];
+        let mut members: Vec<(u32, u32)> = Vec::new();
+        let mut nodes = Vec::new();
+        let (mut value, mut variance, mut filtered) = (Vec::new(), Vec::new(), Vec::new());
+        for g in 0..self.levels.len() {
+            let n = order_of_level(self.levels[g]);
+            if n == 0 {
+                continue;
+            }
+            let (t, front) = ((g / 2) as u32, g % 2 == 0);
+            let [a, b, c] = scene.positions()[t as usize];
+            let spacing = (longest_edge(a, b, c) / n as f32).clamp(1e-4 * cap, cap);
+            let base = self.offsets[g] as usize;
+            for d in 0..=n {
+                for j in 0..=d {
+                    let k = base + grid_index(d - j, j);
+                    let id = w.estimate_id[k];
+                    if w.burial[k] != Burial::Valid || id == NO_INDEX || w.line_of[k] != NO_INDEX {
+                        continue;
+                    }
+                    if node_of[id as usize] == NO_INDEX {
+                        node_of[id as usize] = nodes.len() as u32;
+                        nodes.push(Node {
+                            triangle: t,
+                            uv: Vec2::new((d - j) as f32, j as f32) / n as f32,
+                            front,
+                            spacing,
+                            guarded: w.crossed[g],
+                        });
+                        value.push(w.raw[k]);
+                        variance.push(w.std_error[k] * w.std_error[k]);
+                        filtered.push(w.samples[k] > 0);
+                    }
+                    members.push((k as u32, node_of[id as usize]));
+                }
+            }
+        }
+        let (frames, origin): (Vec<(Vec3, Vec3)>, Vec<Vec3>) = nodes
+            .par_iter()
+            .map(|n| {
+                let p = scene.surface_point(n.triangle, n.uv, n.front);
+                ((p.position, p.shading_normal), scene.spawn_origin(&p))
+            })
+            .unzip();
+        let (position, normal): (Vec<Vec3>, Vec<Vec3>) = frames.into_iter().unzip();
+        let guarded: Vec<bool> = nodes.iter().map(|n| n.guarded).collect();
+        let spacing: Vec<f32> = nodes.iter().map(|n| n.spacing).collect();
+        let valid = vec![true; nodes.len()];
+        let (value, variance) = filter_points(
+            &PointFilterInput {
+                value: &value,
+                variance: &variance,
+                position: &position,
+                normal: &normal,
+                spacing: &spacing,
+                valid: &valid,
+                filtered: &filtered,
+                guarded: &guarded,
+                floor: self.settings.floor,
+            },
+            &self.settings.filter,
+            &|p, q| {
+                let d = origin[q] - origin[p];
+                let length = d.length();
+                length == 0.0 || !scene.occluded(origin[p], d / length, length)
+            },
+        );
+        for (k, node) in members {
+            let (k, node) = (k as usize, node as usize);
+            if filtered[node] {
+                w.raw[k] = value[node];
+                w.std_error[k] = variance[node].max(Vec3::ZERO).map(f32::sqrt);
+            }
+        }
+    }
+}
