@@ -32,10 +32,10 @@ impl IrradianceMaps {
     /// of their samples. Samples with a crossing line keep their own estimates and lend
     /// them to nobody; the other samples of crossed grids share only with neighbours
     /// that nothing separates from them (an any-hit ray between the two ray origins).
-    /// Estimates without samples (a re-bake's priors, filtered when they were made) are
-    /// taps, not filtered.
+    /// Estimates without samples are taps, not filtered. An incremental re-bake filters
+    /// nothing (module docs, Filtering).
     pub(super) fn share_samples(&self, scene: &TracedScene, w: &mut Working) {
-        if self.settings.filter.iterations == 0 {
+        if self.settings.filter.iterations == 0 || w.rebake {
             return;
         }
         let cap = 1.0 / self.settings.density.max(f32::MIN_POSITIVE);

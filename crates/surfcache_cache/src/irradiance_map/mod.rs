@@ -94,15 +94,17 @@
 //! published textures cannot show either (an engine's filter knows no crossings).
 //!
 //! **Filtering** (the thesis' outlook: sharing samples). Once no grid refines any more,
-//! every valid estimate is filtered with its neighbours in space
+//! every valid estimate of a bake is filtered with its neighbours in space
 //! ([`crate::filter::filter_points`], [`IrradianceMapSettings::filter`]): each estimate
 //! once however many corners share it, with the spacing of its grid's order (at most one
 //! sample spacing of the density), a weighted mean at the largest of three scales whose
-//! value the smaller ones agree with. Samples with a crossing line keep their own estimates; the
-//! other samples of crossed grids share only with neighbours an any-hit ray finds
-//! nothing between. The refinement test before saw each sample's own estimate.
-//! Estimates without samples (a re-bake's kept priors, filtered when they were made) are
-//! taps but keep their values.
+//! value the smaller ones agree with. Samples with a crossing line keep their own
+//! estimates; the other samples of crossed grids share only with neighbours an any-hit
+//! ray finds nothing between. The refinement test before saw each sample's own estimate.
+//! An incremental re-bake does not filter: its estimates update values that were
+//! filtered when they were made (re-estimated ones meet the bound on their own), and a
+//! changed sample averaged with neighbours that kept their values would lose most of its
+//! change (as lightmaps do, [`crate::lightmap`]).
 //!
 //! **Storage.** Samples are three half floats (6 bytes, [`crate::stored_rgb`], one
 //! [`StoreScale`] chosen from the largest
@@ -433,6 +435,7 @@ impl SurfaceCache for IrradianceMaps {
             w.start_log2 = start_log2;
             w.priors = priors;
             w.prior_offsets = prior_offsets;
+            w.rebake = true;
         }
         fresh
     }

@@ -55,6 +55,9 @@ pub(super) struct Working {
     pub(super) estimate_id: Vec<u32>,
     /// Estimates received so far, over all rounds.
     pub(super) estimates_seen: u32,
+    /// An incremental re-bake ([`SurfaceCache::remap`]): its estimates update filtered
+    /// values and are not filtered again (module docs, Filtering).
+    pub(super) rebake: bool,
     /// Re-bakes: values of the maps before an edit, grid by grid, for the first round
     /// ([`SamplePoint::prior`]); `prior_offsets[g]` is grid slot g's first, or
     /// [`NO_INDEX`] for a grid without one.
