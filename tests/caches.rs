@@ -24,8 +24,8 @@
 mod common;
 
 use common::{
-    ASSETS, CORNELL_FAST, Points, assert_near, estimator_with, expect_success, grey, lookup,
-    stderr_of, temp_dir,
+    ASSETS, CORNELL_FAST, Points, assert_near, estimator_with, expect_error, expect_success, grey,
+    lookup, stderr_of, temp_dir,
 };
 use serde_json::Value;
 use std::f32::consts::PI;
@@ -114,28 +114,6 @@ fn surfcache(args: &[&str]) -> Output {
         .env("RUST_BACKTRACE", "1")
         .output()
         .expect("the surfcache binary runs")
-}
-
-/// Non-zero exit, nothing on stdout, exactly one stderr line `error: …` holding `needle`.
-#[track_caller]
-fn expect_one_line_error(out: &Output, needle: &str) {
-    let stderr = stderr_of(out);
-    assert!(!out.status.success(), "expected failure; stderr:\n{stderr}");
-    assert!(out.status.code().is_some(), "killed by a signal:\n{stderr}");
-    assert!(!stderr.contains("panicked"), "panic:\n{stderr}");
-    assert!(
-        out.stdout.is_empty(),
-        "stdout not empty on error: {}",
-        String::from_utf8_lossy(&out.stdout)
-    );
-    let lines: Vec<&str> = stderr.lines().collect();
-    assert_eq!(lines.len(), 1, "expected one stderr line, got:\n{stderr}");
-    assert!(lines[0].starts_with("error: "), "{}", lines[0]);
-    assert!(
-        lines[0].contains(needle),
-        "'{needle}' missing: {}",
-        lines[0]
-    );
 }
 
 /// Writes `x,y,z,nx,ny,nz` rows.
@@ -681,15 +659,15 @@ fn query_rejects_bad_points_files_with_one_line() {
         let path = dir.join(name);
         std::fs::write(&path, text).unwrap();
         let out = surfcache(&["query", bake.to_str().unwrap(), path.to_str().unwrap()]);
-        expect_one_line_error(&out, needle);
+        expect_error(&out, &[needle]);
     }
     let missing = dir.join("missing.csv");
     let out = surfcache(&["query", bake.to_str().unwrap(), missing.to_str().unwrap()]);
-    expect_one_line_error(&out, "missing.csv");
+    expect_error(&out, &["missing.csv"]);
     // A directory without a bake.
     let good = dir.join("good.csv");
     write_points(&good, &[(Vec3::new(0.3, 0.0, 0.3), Vec3::Y)]);
     let empty = temp_dir("cornell_query_errors_empty");
     let out = surfcache(&["query", empty.to_str().unwrap(), good.to_str().unwrap()]);
-    expect_one_line_error(&out, "");
+    expect_error(&out, &[""]);
 }

@@ -14,7 +14,7 @@ mod environment;
 mod escaping;
 mod gltf_files;
 
-use common::{ASSETS, mesh_index, pack_glb, stderr_of};
+use common::{ASSETS, assert_no_panic, expect_error, mesh_index, pack_glb, stderr_of};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -41,43 +41,6 @@ fn reference(scene: impl AsRef<std::ffi::OsStr>, points: &Path, extra: &[&str]) 
         .env("RUST_BACKTRACE", "1")
         .output()
         .expect("the surfcache binary runs")
-}
-
-fn assert_no_panic(out: &Output) {
-    let stderr = stderr_of(out);
-    for bad in ["panicked", "backtrace", "RUST_BACKTRACE"] {
-        assert!(!stderr.contains(bad), "stderr shows a panic:\n{stderr}");
-    }
-    assert!(
-        out.status.code().is_some(),
-        "killed by a signal: {:?}\n{stderr}",
-        out.status
-    );
-}
-
-/// Non-zero exit, nothing on stdout, exactly one stderr line `error: …` containing every
-/// needle. Returns the line.
-#[track_caller]
-fn expect_error(out: &Output, needles: &[&str]) -> String {
-    assert_no_panic(out);
-    let stderr = stderr_of(out);
-    assert!(
-        !out.status.success(),
-        "expected failure, got success; stderr:\n{stderr}"
-    );
-    assert!(
-        out.stdout.is_empty(),
-        "stdout not empty on error: {}",
-        String::from_utf8_lossy(&out.stdout)
-    );
-    let lines: Vec<&str> = stderr.lines().collect();
-    assert_eq!(lines.len(), 1, "expected one stderr line, got:\n{stderr}");
-    let line = lines[0];
-    assert!(line.starts_with("error: "), "not an error line: {line}");
-    for needle in needles {
-        assert!(line.contains(needle), "'{needle}' missing from: {line}");
-    }
-    line.to_string()
 }
 
 /// Exit 0, the result CSV on stdout (one row), exactly one stderr line `warning: …`

@@ -242,6 +242,44 @@ pub fn stderr_of(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
+/// No panic, backtrace or death by signal in a run of the `surfcache` binary.
+pub fn assert_no_panic(out: &Output) {
+    let stderr = stderr_of(out);
+    for bad in ["panicked", "backtrace", "RUST_BACKTRACE"] {
+        assert!(!stderr.contains(bad), "stderr shows a panic:\n{stderr}");
+    }
+    assert!(
+        out.status.code().is_some(),
+        "killed by a signal: {:?}\n{stderr}",
+        out.status
+    );
+}
+
+/// Non-zero exit, nothing on stdout, exactly one stderr line `error: …` containing every
+/// needle. Returns the line.
+#[track_caller]
+pub fn expect_error(out: &Output, needles: &[&str]) -> String {
+    assert_no_panic(out);
+    let stderr = stderr_of(out);
+    assert!(
+        !out.status.success(),
+        "expected failure, got success; stderr:\n{stderr}"
+    );
+    assert!(
+        out.stdout.is_empty(),
+        "stdout not empty on error: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(lines.len(), 1, "expected one stderr line, got:\n{stderr}");
+    let line = lines[0];
+    assert!(line.starts_with("error: "), "not an error line: {line}");
+    for needle in needles {
+        assert!(line.contains(needle), "'{needle}' missing from: {line}");
+    }
+    line.to_string()
+}
+
 /// A fresh, empty directory for one test, in the test binary's own folder of cargo's
 /// temporary directory.
 pub fn temp_dir(test: &str) -> PathBuf {

@@ -33,10 +33,10 @@ impl IrradianceMaps {
     /// them to nobody; the other samples of crossed grids share only with neighbours
     /// that nothing separates from them (an any-hit ray between the two ray origins).
     /// Estimates without samples are taps, not filtered. An incremental re-bake filters
-    /// nothing (module docs, Filtering).
-    pub(super) fn share_samples(&self, scene: &TracedScene, w: &mut Working) {
+    /// nothing (module docs, Filtering). Returns whether it filtered.
+    pub(super) fn share_samples(&self, scene: &TracedScene, w: &mut Working) -> bool {
         if self.settings.filter.iterations == 0 || w.rebake {
-            return;
+            return false;
         }
         let cap = 1.0 / self.settings.density.max(f32::MIN_POSITIVE);
         let mut node_of = vec![NO_INDEX; w.estimates_seen as usize];
@@ -113,5 +113,6 @@ impl IrradianceMaps {
                 w.std_error[k] = variance[node].max(Vec3::ZERO).map(f32::sqrt);
             }
         }
+        true
     }
 }

@@ -350,9 +350,8 @@ impl SurfaceCache for IrradianceMaps {
         self.fill_buried(&mut w, total);
         self.buried = w.burial.iter().filter(|&&b| b != Burial::Valid).count() as u64;
         self.decide_refinement(&mut w);
-        if !w.refine.contains(&true) {
-            // The grids are final: share samples between neighbours, then refill.
-            self.share_samples(scene, &mut w);
+        // The grids are final: share samples between neighbours, then refill.
+        if !w.refine.contains(&true) && self.share_samples(scene, &mut w) {
             self.fill_buried(&mut w, total);
         }
         w.end_round();
