@@ -14,7 +14,9 @@ mod environment;
 mod escaping;
 mod gltf_files;
 
-use common::{ASSETS, assert_no_panic, expect_error, mesh_index, pack_glb, stderr_of};
+use common::{
+    ASSETS, assert_no_panic, expect_error, mesh_index, one_stderr_line, pack_glb, stderr_of,
+};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -54,14 +56,7 @@ fn expect_warning(out: &Output, needles: &[&str]) -> String {
     let rows: Vec<&str> = stdout.lines().collect();
     assert_eq!(rows.len(), 2, "stdout:\n{stdout}");
     assert_eq!(rows[0], "x,y,z,r,g,b,rel_std");
-    let lines: Vec<&str> = stderr.lines().collect();
-    assert_eq!(lines.len(), 1, "expected one stderr line, got:\n{stderr}");
-    let line = lines[0];
-    assert!(line.starts_with("warning: "), "not a warning line: {line}");
-    for needle in needles {
-        assert!(line.contains(needle), "'{needle}' missing from: {line}");
-    }
-    line.to_string()
+    one_stderr_line(&stderr, "warning", needles)
 }
 
 #[track_caller]

@@ -270,10 +270,20 @@ pub fn expect_error(out: &Output, needles: &[&str]) -> String {
         "stdout not empty on error: {}",
         String::from_utf8_lossy(&out.stdout)
     );
+    one_stderr_line(&stderr, "error", needles)
+}
+
+/// `stderr` is exactly one line `KIND: …` (`error`, `warning`) containing every needle.
+/// Returns the line.
+#[track_caller]
+pub fn one_stderr_line(stderr: &str, kind: &str, needles: &[&str]) -> String {
     let lines: Vec<&str> = stderr.lines().collect();
     assert_eq!(lines.len(), 1, "expected one stderr line, got:\n{stderr}");
     let line = lines[0];
-    assert!(line.starts_with("error: "), "not an error line: {line}");
+    assert!(
+        line.starts_with(&format!("{kind}: ")),
+        "not a {kind} line: {line}"
+    );
     for needle in needles {
         assert!(line.contains(needle), "'{needle}' missing from: {line}");
     }

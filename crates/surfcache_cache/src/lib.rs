@@ -70,17 +70,17 @@ impl Method {
         Self::ALL.into_iter().find(|m| m.name() == name)
     }
 
-    /// Default fewest and most hemisphere samples per estimate. Irradiance maps and
-    /// vertex lighting take the estimator's (every sample point meets the bound on its
-    /// own, the thesis' model). A lightmap texel shares samples with its neighbours
-    /// ([`filter`]) and its adaptive rounds compare the *filtered* error with the bound,
-    /// so its own estimate starts far lower; the cap keeps those rounds from chasing the
-    /// dimmest, noisiest texels of a level (lit through small openings) to tens of
-    /// thousands of samples each.
+    /// Default fewest and most hemisphere samples per estimate. Lightmap texels and
+    /// irradiance-map grid samples share samples with their neighbours ([`filter`]) and
+    /// a level holds millions of them: their own estimates start far lower than the
+    /// thesis' (a lightmap's adaptive rounds compare the *filtered* error with the
+    /// bound), and the cap keeps the dimmest, noisiest of them (lit through small
+    /// openings) from taking tens of thousands of samples each. Vertex lighting takes the
+    /// estimator's: every vertex meets the bound on its own, the thesis' model.
     pub fn default_sample_range(self) -> (u32, u32) {
         match self {
-            Method::Lightmap => (64, 1024),
-            Method::Vertex | Method::IrradianceMap => {
+            Method::Lightmap | Method::IrradianceMap => (64, 1024),
+            Method::Vertex => {
                 let e = surfcache_trace::EstimatorSettings::default();
                 (e.min_samples, e.max_samples)
             }

@@ -104,7 +104,7 @@ pub fn filter_points(
             gain,
             visible,
         };
-        let out: Vec<(Vec3, Vec3)> = (0..value.len())
+        (value, variance) = (0..value.len())
             .into_par_iter()
             .map_init(Vec::new, |taps, p| {
                 if input.valid[p] && input.filtered[p] {
@@ -113,11 +113,7 @@ pub fn filter_points(
                     (value[p], variance[p])
                 }
             })
-            .collect();
-        for (p, (v, s)) in out.into_iter().enumerate() {
-            value[p] = v;
-            variance[p] = s;
-        }
+            .unzip();
     }
     (value, variance)
 }

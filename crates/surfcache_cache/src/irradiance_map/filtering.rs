@@ -76,14 +76,13 @@ impl IrradianceMaps {
                 }
             }
         }
-        let (frames, origin): (Vec<(Vec3, Vec3)>, Vec<Vec3>) = nodes
+        let ((position, normal), origin): ((Vec<Vec3>, Vec<Vec3>), Vec<Vec3>) = nodes
             .par_iter()
             .map(|n| {
                 let p = scene.surface_point(n.triangle, n.uv, n.front);
                 ((p.position, p.shading_normal), scene.spawn_origin(&p))
             })
             .unzip();
-        let (position, normal): (Vec<Vec3>, Vec<Vec3>) = frames.into_iter().unzip();
         let guarded: Vec<bool> = nodes.iter().map(|n| n.guarded).collect();
         let spacing: Vec<f32> = nodes.iter().map(|n| n.spacing).collect();
         let valid = vec![true; nodes.len()];

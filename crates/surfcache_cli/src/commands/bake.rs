@@ -39,12 +39,12 @@ pub struct BakeArgs {
     /// irradiance).
     #[arg(long, default_value_t = 0.01)]
     max_rel_error: f32,
-    /// Fewest hemisphere samples per estimate [default: 64 for lightmaps, whose texels
-    /// share samples with their neighbours; 256 otherwise].
+    /// Fewest hemisphere samples per estimate [default: 64 for lightmaps and irradiance
+    /// maps, whose samples are shared with their neighbours; 256 for vertex lighting].
     #[arg(long)]
     min_samples: Option<u32>,
-    /// Most hemisphere samples per estimate [default: 1024 for lightmaps; 65536
-    /// otherwise].
+    /// Most hemisphere samples per estimate [default: 1024 for lightmaps and irradiance
+    /// maps; 65536 for vertex lighting].
     #[arg(long)]
     max_samples: Option<u32>,
     /// Sample budget: exactly N hemisphere samples per estimate (per texel, per sample
