@@ -168,6 +168,10 @@ pub fn uniform_sphere(u: Vec2) -> Vec3 {
 /// 1974): for each of G = 2^⌈log₂ n⌉ equal slices of [0, 1) it holds the first bin the
 /// slice can fall in, so a sample searches only the bins of its slice (about one)
 /// instead of all n; the answer is the one a binary search over the whole cdf gives.
+/// The cdf and the guide are interleaved in one table ([`CdfEntry`]): where the weights
+/// are even, a slice's guide points at a bin next to it, and a sample reads both from
+/// one cache line (an environment map's 512 rows of 1,024 columns do not fit a core's
+/// cache, and the two reads were two misses).
 ///
 /// ```
 /// use surfcache_core::sampling::Distribution1D;
@@ -177,13 +181,23 @@ pub fn uniform_sphere(u: Vec2) -> Vec3 {
 /// ```
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Distribution1D {
-    /// cdf[i] = Σ_{k<i} w_k / Σ w, with cdf[n] = 1.
-    cdf: Vec<f32>,
+    /// Entry k holds cdf[k] for k ≤ n and guide[k] for k ≤ G (the rest are zero).
+    table: Vec<CdfEntry>,
+    /// Number of bins n.
+    bins: usize,
+    /// Number of guide slices G, a power of two (so that g / G and u · G are exact in f32).
+    slices: usize,
     /// Σ w (0 when every weight is zero: the distribution is then uniform).
     total: f64,
-    /// guide[g] = the first bin whose upper cdf exceeds g / G, for g = 0..=G (G a power
-    /// of two, so that g / G and u · G are exact in f32).
-    guide: Vec<u32>,
+}
+
+/// One entry of [`Distribution1D`]'s table: cdf[k] = Σ_{i<k} w_i / Σ w (cdf[n] = 1), and
+/// guide[k], the first bin whose upper cdf exceeds k / G.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C, align(8))]
+struct CdfEntry {
+    cdf: f32,
+    guide: u32,
 }
 
 impl Distribution1D {
@@ -212,15 +226,24 @@ impl Distribution1D {
             });
         }
         let slices = n.next_power_of_two();
-        let guide = (0..=slices)
-            .map(|g| first_above(&cdf, g as f32 / slices as f32) as u32)
-            .collect();
-        Self { cdf, total, guide }
+        let mut table = vec![CdfEntry::default(); n.max(slices) + 1];
+        for (entry, &c) in table.iter_mut().zip(&cdf) {
+            entry.cdf = c;
+        }
+        for (g, entry) in table.iter_mut().enumerate().take(slices + 1) {
+            entry.guide = cdf[1..].partition_point(|&c| c <= g as f32 / slices as f32) as u32;
+        }
+        Self {
+            table,
+            bins: n,
+            slices,
+            total,
+        }
     }
 
     /// Number of bins.
     pub fn len(&self) -> usize {
-        self.cdf.len().saturating_sub(1)
+        self.bins
     }
 
     /// True for a distribution over no bins.
@@ -236,25 +259,35 @@ impl Distribution1D {
     /// Probability of bin `i`.
     #[inline]
     pub fn pmf(&self, i: usize) -> f32 {
-        self.cdf[i + 1] - self.cdf[i]
+        self.table[i + 1].cdf - self.table[i].cdf
     }
 
     /// Inverts the cdf at `u ∈ [0,1)`: the bin, its probability, and `u` remapped to [0,1)
     /// inside the bin (so one random number serves both the choice and the position).
     #[inline]
     pub fn sample(&self, u: f32) -> (usize, f32, f32) {
-        let n = self.len();
+        let n = self.bins;
         // First bin whose upper cdf exceeds u (skipping zero-probability bins), searched
         // between the guides of u's slice: u ∈ [g/G, (g+1)/G) lies in bins guide[g] ..=
         // guide[g+1].
-        let slices = self.guide.len() - 1;
+        let slices = self.slices;
         let g = ((u * slices as f32) as usize).min(slices - 1);
         let (first, last) = (
-            self.guide[g] as usize,
-            (self.guide[g + 1] as usize).min(n - 1),
+            self.table[g].guide as usize,
+            (self.table[g + 1].guide as usize).min(n - 1),
         );
-        let i = (first + self.cdf[first + 1..=last + 1].partition_point(|&c| c <= u)).min(n - 1);
-        let (lo, hi) = (self.cdf[i], self.cdf[i + 1]);
+        // Binary search for the number of upper cdfs cdf[first + 1 ..= last + 1] ≤ u.
+        let (mut lo, mut hi) = (first, last + 1);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if self.table[mid + 1].cdf <= u {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        let i = lo.min(n - 1);
+        let (lo, hi) = (self.table[i].cdf, self.table[i + 1].cdf);
         let pmf = hi - lo;
         let remapped = if pmf > 0.0 {
             ((u - lo) / pmf).clamp(0.0, ONE_MINUS_EPSILON)
@@ -263,11 +296,6 @@ impl Distribution1D {
         };
         (i, pmf, remapped)
     }
-}
-
-/// The first bin i whose upper cdf `cdf[i + 1]` exceeds `u` (n when none does).
-fn first_above(cdf: &[f32], u: f32) -> usize {
-    cdf[1..].partition_point(|&c| c <= u)
 }
 
 /// The largest f32 below 1.
@@ -429,13 +457,15 @@ mod tests {
                 })
                 .collect();
             let d = Distribution1D::new(&weights);
+            let cdf: Vec<f32> = d.table[..=n].iter().map(|e| e.cdf).collect();
             let mut us: Vec<f32> = (0..5000).map(|_| rng.next_f32()).collect();
-            us.extend(d.cdf.iter().copied().filter(|&c| c < 1.0));
+            us.extend(cdf.iter().copied().filter(|&c| c < 1.0));
             let slices = n.next_power_of_two();
             us.extend((0..slices).map(|g| g as f32 / slices as f32));
             us.push(ONE_MINUS_EPSILON);
             for u in us {
-                let full = first_above(&d.cdf, u).min(n - 1);
+                // The first bin whose upper cdf exceeds u, searched over the whole cdf.
+                let full = cdf[1..].partition_point(|&c| c <= u).min(n - 1);
                 assert_eq!(d.sample(u).0, full, "n {n} u {u}");
             }
         }
