@@ -168,7 +168,7 @@ pub fn uniform_sphere(u: Vec2) -> Vec3 {
 /// 1974): for each of G = 2^⌈log₂ n⌉ equal slices of [0, 1) it holds the first bin the
 /// slice can fall in, so a sample searches only the bins of its slice (about one)
 /// instead of all n; the answer is the one a binary search over the whole cdf gives.
-/// The cdf and the guide are interleaved in one table ([`CdfEntry`]): where the weights
+/// The cdf and the guide are interleaved in one table of 8-byte entries: where the weights
 /// are even, a slice's guide points at a bin next to it, and a sample reads both from
 /// one cache line (an environment map's 512 rows of 1,024 columns do not fit a core's
 /// cache, and the two reads were two misses).
