@@ -181,7 +181,7 @@ pub fn uniform_sphere(u: Vec2) -> Vec3 {
 /// ```
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Distribution1D {
-    /// Entry k holds cdf[k] for k ≤ n and guide[k] for k ≤ G (the rest are zero).
+    /// G + 1 entries (G ≥ n): entry k holds guide[k], and cdf[k] for k ≤ n (zero beyond).
     table: Vec<CdfEntry>,
     /// Number of bins n.
     bins: usize,
@@ -226,11 +226,11 @@ impl Distribution1D {
             });
         }
         let slices = n.next_power_of_two();
-        let mut table = vec![CdfEntry::default(); n.max(slices) + 1];
+        let mut table = vec![CdfEntry::default(); slices + 1];
         for (entry, &c) in table.iter_mut().zip(&cdf) {
             entry.cdf = c;
         }
-        for (g, entry) in table.iter_mut().enumerate().take(slices + 1) {
+        for (g, entry) in table.iter_mut().enumerate() {
             entry.guide = cdf[1..].partition_point(|&c| c <= g as f32 / slices as f32) as u32;
         }
         Self {
@@ -276,17 +276,8 @@ impl Distribution1D {
             self.table[g].guide as usize,
             (self.table[g + 1].guide as usize).min(n - 1),
         );
-        // Binary search for the number of upper cdfs cdf[first + 1 ..= last + 1] ≤ u.
-        let (mut lo, mut hi) = (first, last + 1);
-        while lo < hi {
-            let mid = lo + (hi - lo) / 2;
-            if self.table[mid + 1].cdf <= u {
-                lo = mid + 1;
-            } else {
-                hi = mid;
-            }
-        }
-        let i = lo.min(n - 1);
+        let i =
+            (first + self.table[first + 1..=last + 1].partition_point(|e| e.cdf <= u)).min(n - 1);
         let (lo, hi) = (self.table[i].cdf, self.table[i + 1].cdf);
         let pmf = hi - lo;
         let remapped = if pmf > 0.0 {
