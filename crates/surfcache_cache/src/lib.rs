@@ -530,4 +530,14 @@ impl IrradianceLookup for Cache {
         self.holds(triangle, front)
             .then(|| self.lookup(triangle, uv, front))
     }
+
+    /// Half the sample spacing at the cache's density; 0 for vertex lighting, whose
+    /// spacing is the mesh's.
+    fn albedo_footprint(&self) -> f32 {
+        match self {
+            Self::Vertex(_) => 0.0,
+            Self::IrradianceMap(c) => 0.5 / c.settings().density,
+            Self::Lightmap(c) => 0.5 / c.settings().texels_per_metre,
+        }
+    }
 }

@@ -4,7 +4,7 @@
 //! at the top, covers u = (i+½)/W, v = (j+½)/H and looks along
 //! θ = vπ, φ = (u−½)2π, d = (sin θ sin φ, cos θ, −sin θ cos φ).
 
-use crate::{color::luminance, sampling::Distribution1D};
+use crate::{color::luminance, prefetch::prefetch, sampling::Distribution1D};
 use core::f32::consts::{PI, TAU};
 use glam::{Vec2, Vec3};
 use std::sync::Arc;
@@ -71,22 +71,44 @@ impl EnvironmentMap {
     }
 
     /// Bilinear lookup in direction `d` (unit), wrapping horizontally and clamping at the poles.
+    #[inline]
     pub fn radiance(&self, d: Vec3) -> Vec3 {
-        let uv = direction_to_uv(d);
+        self.radiance_uv(direction_to_uv(d))
+    }
+
+    /// [`Self::radiance`] at image coordinates `uv` ([`direction_to_uv`]).
+    #[inline]
+    pub fn radiance_uv(&self, uv: Vec2) -> Vec3 {
+        let ([i0, i1], [j0, j1], fx, fy) = self.footprint(uv);
+        let top = self.texel(i0, j0) * (1.0 - fx) + self.texel(i1, j0) * fx;
+        let bottom = self.texel(i0, j1) * (1.0 - fx) + self.texel(i1, j1) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+
+    /// Asks the processor to fetch the texels [`Self::radiance_uv`] reads at `uv` into its
+    /// caches, so that a lookup after other work (a shadow ray) does not wait for memory.
+    /// A hint only: it changes no result.
+    #[inline]
+    pub fn prefetch_uv(&self, uv: Vec2) {
+        let ([i0, _], [j0, j1], _, _) = self.footprint(uv);
+        for j in [j0, j1] {
+            prefetch(&self.texels[(j * self.width + i0) as usize]);
+        }
+    }
+
+    /// Columns, rows and weights of the bilinear lookup at `uv`.
+    #[inline]
+    fn footprint(&self, uv: Vec2) -> ([u32; 2], [u32; 2], f32, f32) {
         let x = uv.x * self.width as f32 - 0.5;
         let y = (uv.y * self.height as f32 - 0.5).clamp(0.0, (self.height - 1) as f32);
         let x0 = x.floor();
         let y0 = y.floor();
-        let fx = x - x0;
-        let fy = y - y0;
         let w = self.width as i64;
         let i0 = (x0 as i64).rem_euclid(w) as u32;
         let i1 = (x0 as i64 + 1).rem_euclid(w) as u32;
         let j0 = y0 as u32;
         let j1 = (j0 + 1).min(self.height - 1);
-        let top = self.texel(i0, j0) * (1.0 - fx) + self.texel(i1, j0) * fx;
-        let bottom = self.texel(i0, j1) * (1.0 - fx) + self.texel(i1, j1) * fx;
-        top * (1.0 - fy) + bottom * fy
+        ([i0, i1], [j0, j1], x - x0, y - y0)
     }
 
     /// Solid angle of pixel row `j`: (2π/W)·(cos θ₀ − cos θ₁).
@@ -146,6 +168,15 @@ impl Environment {
     pub fn radiance(&self, d: Vec3) -> Vec3 {
         match &self.map {
             Some(map) => map.radiance(d) * self.intensity,
+            None => self.color * self.intensity,
+        }
+    }
+
+    /// [`Self::radiance`] at image coordinates `uv` of the map ([`direction_to_uv`]).
+    #[inline]
+    pub fn radiance_uv(&self, uv: Vec2) -> Vec3 {
+        match &self.map {
+            Some(map) => map.radiance_uv(uv) * self.intensity,
             None => self.color * self.intensity,
         }
     }
@@ -245,10 +276,24 @@ impl EnvironmentSampler {
         (d, pdf)
     }
 
+    /// Prefetches the table entries [`Self::sample`] reads at `u` (the row's column
+    /// distribution near `u.x`), so that a sample drawn after other work finds them in
+    /// the caches ([`crate::prefetch`]).
+    #[inline]
+    pub fn prefetch(&self, u: Vec2) {
+        let (j, _, _) = self.rows.sample(u.y);
+        self.columns[j].prefetch(u.x);
+    }
+
     /// The solid-angle density [`Self::sample`] has at direction `d` (unit).
     #[inline]
     pub fn pdf(&self, d: Vec3) -> f32 {
-        let uv = direction_to_uv(d);
+        self.pdf_uv(direction_to_uv(d))
+    }
+
+    /// [`Self::pdf`] at image coordinates `uv` ([`direction_to_uv`]).
+    #[inline]
+    pub fn pdf_uv(&self, uv: Vec2) -> f32 {
         let i = ((uv.x * self.width as f32) as i64).clamp(0, self.width as i64 - 1) as usize;
         let j = ((uv.y * self.height as f32) as i64).clamp(0, self.height as i64 - 1) as usize;
         self.rows.pmf(j) * self.columns[j].pmf(i) / self.pixel_solid_angle[j]

@@ -11,6 +11,7 @@ pub mod color;
 pub mod environment;
 pub mod geometry;
 pub mod index;
+pub mod prefetch;
 pub mod sampling;
 pub mod scene;
 pub mod scenes;

@@ -262,6 +262,14 @@ impl Distribution1D {
         self.table[i + 1].cdf - self.table[i].cdf
     }
 
+    /// Prefetches the table entry [`Self::sample`] starts its search at for `u`
+    /// ([`crate::prefetch`]).
+    #[inline]
+    pub fn prefetch(&self, u: f32) {
+        let g = ((u * self.slices as f32) as usize).min(self.slices - 1);
+        crate::prefetch::prefetch(&self.table[g]);
+    }
+
     /// Inverts the cdf at `u ∈ [0,1)`: the bin, its probability, and `u` remapped to [0,1)
     /// inside the bin (so one random number serves both the choice and the position).
     #[inline]

@@ -215,7 +215,8 @@ impl Mesh {
     }
 }
 
-/// A linear-RGBA texture, read with glTF's default sampler (bilinear, repeat).
+/// A linear-RGBA texture, read with glTF's default sampler (bilinear, repeat), with a
+/// pyramid of box-filtered reductions for lookups that may average it.
 ///
 /// 8-bit images keep their encoded bytes (4 per texel instead of 16: game textures are
 /// what a bake's hit points read most, and at a quarter of the memory far more of them
@@ -223,15 +224,31 @@ impl Mesh {
 /// ([`crate::color::srgb_to_linear`], tabulated) and alpha as `a / 255`. Deeper images are
 /// decoded to linear on load.
 ///
+/// Level ℓ > 0 halves level ℓ − 1 (rounding down, at least one texel), each texel the
+/// area-weighted mean of the *linear* values it covers, so every level keeps the image's
+/// mean; reductions of 8-bit images are stored the same way, each colour at the code whose
+/// decoded value is nearest ([`Self::sample_level`]).
+///
 /// ```
 /// use surfcache_core::Texture;
 /// let t = Texture::from_srgb8(1, 1, vec![[255, 188, 0, 128]]).unwrap();
 /// let c = t.sample(glam::Vec2::new(0.3, 0.7));
 /// assert!((c.x - 1.0).abs() < 1e-6 && (c.y - 0.5).abs() < 3e-3 && c.z == 0.0);
 /// assert_eq!(c.w, 128.0 / 255.0);
+/// // A 2×2 black-and-white checker reduces to one texel of their linear mean.
+/// let checker = Texture::from_srgb8(2, 2, vec![[0, 0, 0, 255], [255; 4], [255; 4], [0, 0, 0, 255]]);
+/// let grey = checker.unwrap().sample_level(glam::Vec2::ZERO, 1);
+/// assert!((grey.x - 0.5).abs() < 3e-3);
 /// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct Texture {
+    /// The image (level 0) and its reductions down to one texel.
+    levels: Vec<Level>,
+}
+
+/// One level of a [`Texture`].
+#[derive(Clone, Debug, PartialEq)]
+struct Level {
     width: u32,
     height: u32,
     /// Row-major, row 0 at the top (glTF UV (0,0) is the image's top-left).
@@ -260,24 +277,87 @@ impl Texture {
 
     fn checked(width: u32, height: u32, len: usize, texels: Texels) -> Option<Self> {
         let count = width as usize * height as usize;
-        (count > 0 && len == count).then_some(Self {
+        if count == 0 || len != count {
+            return None;
+        }
+        let base = Level {
             width,
             height,
             texels,
-        })
+        };
+        let encoded = matches!(base.texels, Texels::Srgb8(_));
+        let mut linear: Vec<Vec4> = (0..count)
+            .map(|k| base.texel(k as u32 % width, k as u32 / width))
+            .collect();
+        let mut levels = vec![base];
+        let (mut w, mut h) = (width, height);
+        while w > 1 || h > 1 {
+            let (next, w2, h2) = reduce(&linear, w, h);
+            levels.push(Level {
+                width: w2,
+                height: h2,
+                texels: if encoded {
+                    Texels::Srgb8(next.iter().map(|&c| encode_srgb8(c)).collect())
+                } else {
+                    Texels::Linear(next.clone())
+                },
+            });
+            (linear, w, h) = (next, w2, h2);
+        }
+        Some(Self { levels })
     }
 
     pub fn width(&self) -> u32 {
-        self.width
+        self.levels[0].width
     }
 
     pub fn height(&self) -> u32 {
-        self.height
+        self.levels[0].height
+    }
+
+    /// Number of levels: the image and its reductions, the last one texel.
+    pub fn level_count(&self) -> usize {
+        self.levels.len()
     }
 
     /// Linear RGBA of texel `(i, j)` (column, row from the top); `i < width`, `j < height`.
     #[inline]
     pub fn texel(&self, i: u32, j: u32) -> Vec4 {
+        self.levels[0].texel(i, j)
+    }
+
+    /// Bilinear lookup with repeat wrapping, glTF's default sampler.
+    #[inline]
+    pub fn sample(&self, uv: Vec2) -> Vec4 {
+        self.levels[0].sample(uv)
+    }
+
+    /// [`Self::sample`] on level `level` (the coarsest where `level` is beyond it): the
+    /// texture averaged over boxes of 2^level texels, what a lookup may read whose result
+    /// is itself averaged over that footprint.
+    #[inline]
+    pub fn sample_level(&self, uv: Vec2, level: usize) -> Vec4 {
+        self.levels[level.min(self.levels.len() - 1)].sample(uv)
+    }
+
+    /// The alpha channel of [`Self::sample`] alone (what an alpha test reads).
+    #[inline]
+    pub fn sample_alpha(&self, uv: Vec2) -> f32 {
+        let level = &self.levels[0];
+        let ([a, b, c, d], fx, fy) = level.footprint(uv);
+        let t = |(i, j): (u32, u32)| match &level.texels {
+            Texels::Srgb8(t) => t[level.index(i, j)][3] as f32 / 255.0,
+            Texels::Linear(t) => t[level.index(i, j)].w,
+        };
+        let top = t(a) * (1.0 - fx) + t(b) * fx;
+        let bottom = t(c) * (1.0 - fx) + t(d) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+}
+
+impl Level {
+    #[inline]
+    fn texel(&self, i: u32, j: u32) -> Vec4 {
         let k = self.index(i, j);
         match &self.texels {
             Texels::Srgb8(t) => {
@@ -316,28 +396,81 @@ impl Texture {
         ([(i0, j0), (i1, j0), (i0, j1), (i1, j1)], fx, fy)
     }
 
-    /// Bilinear lookup with repeat wrapping, glTF's default sampler.
     #[inline]
-    pub fn sample(&self, uv: Vec2) -> Vec4 {
+    fn sample(&self, uv: Vec2) -> Vec4 {
         let ([a, b, c, d], fx, fy) = self.footprint(uv);
         let t = |(i, j): (u32, u32)| self.texel(i, j);
         let top = t(a) * (1.0 - fx) + t(b) * fx;
         let bottom = t(c) * (1.0 - fx) + t(d) * fx;
         top * (1.0 - fy) + bottom * fy
     }
+}
 
-    /// The alpha channel of [`Self::sample`] alone (what an alpha test reads).
-    #[inline]
-    pub fn sample_alpha(&self, uv: Vec2) -> f32 {
-        let ([a, b, c, d], fx, fy) = self.footprint(uv);
-        let t = |(i, j): (u32, u32)| match &self.texels {
-            Texels::Srgb8(t) => t[self.index(i, j)][3] as f32 / 255.0,
-            Texels::Linear(t) => t[self.index(i, j)].w,
-        };
-        let top = t(a) * (1.0 - fx) + t(b) * fx;
-        let bottom = t(c) * (1.0 - fx) + t(d) * fx;
-        top * (1.0 - fy) + bottom * fy
-    }
+/// Halves a `w × h` image of linear texels (rounding down, at least 1): each new texel is
+/// the mean of the old texels under it, weighted by the area they share (a box filter
+/// that keeps the image's mean exactly, odd sizes included).
+fn reduce(texels: &[Vec4], w: u32, h: u32) -> (Vec<Vec4>, u32, u32) {
+    let (w2, h2) = ((w / 2).max(1), (h / 2).max(1));
+    let (across, down) = (box_weights(w, w2), box_weights(h, h2));
+    let rows: Vec<Vec4> = (0..h as usize)
+        .flat_map(|j| {
+            let row = &texels[j * w as usize..(j + 1) * w as usize];
+            across
+                .iter()
+                .map(move |taps| taps.iter().map(|&(i, wt)| row[i] * wt).sum::<Vec4>())
+        })
+        .collect();
+    let out = down
+        .iter()
+        .flat_map(|taps| {
+            let rows = &rows;
+            (0..w2 as usize).map(move |i| {
+                taps.iter()
+                    .map(|&(j, wt)| rows[j * w2 as usize + i] * wt)
+                    .sum::<Vec4>()
+            })
+        })
+        .collect();
+    (out, w2, h2)
+}
+
+/// For each of `m` equal cells over `n` texels: the texels it overlaps and the share of
+/// the cell each covers.
+fn box_weights(n: u32, m: u32) -> Vec<Vec<(usize, f32)>> {
+    let cell = n as f64 / m as f64;
+    (0..m)
+        .map(|k| {
+            let (lo, hi) = (k as f64 * cell, (k + 1) as f64 * cell);
+            (lo.floor() as usize..(hi.ceil() as usize).min(n as usize))
+                .map(|i| {
+                    let overlap = (hi.min(i as f64 + 1.0) - lo.max(i as f64)).max(0.0);
+                    (i, (overlap / cell) as f32)
+                })
+                .filter(|&(_, wt)| wt > 0.0)
+                .collect()
+        })
+        .collect()
+}
+
+/// The 8-bit code of linear RGBA `c`: each colour channel at the code whose decoded value
+/// is nearest, alpha rounded.
+fn encode_srgb8(c: Vec4) -> [u8; 4] {
+    let lut = crate::color::srgb8_to_linear();
+    let code = |x: f32| {
+        let above = lut.partition_point(|&v| v < x).min(255);
+        let below = above.saturating_sub(1);
+        if (x - lut[below]).abs() <= (lut[above] - x).abs() {
+            below as u8
+        } else {
+            above as u8
+        }
+    };
+    [
+        code(c.x),
+        code(c.y),
+        code(c.z),
+        (c.w.clamp(0.0, 1.0) * 255.0).round() as u8,
+    ]
 }
 
 /// How a material's alpha is used.
@@ -403,6 +536,16 @@ impl Material {
     pub fn albedo_at(&self, uv0: Vec2) -> Vec3 {
         match &self.albedo_texture {
             Some(t) => self.albedo * t.sample(uv0).truncate(),
+            None => self.albedo,
+        }
+    }
+
+    /// [`Self::albedo_at`] from level `level` of the albedo texture
+    /// ([`Texture::sample_level`]): the albedo averaged over boxes of 2^level texels.
+    #[inline]
+    pub fn albedo_at_level(&self, uv0: Vec2, level: usize) -> Vec3 {
+        match &self.albedo_texture {
+            Some(t) => self.albedo * t.sample_level(uv0, level).truncate(),
             None => self.albedo,
         }
     }
@@ -573,6 +716,79 @@ mod tests {
             assert_eq!(encoded.sample_alpha(uv), encoded.sample(uv).w);
             assert_eq!(linear.sample_alpha(uv), linear.sample(uv).w);
         }
+    }
+
+    #[test]
+    fn texture_levels_keep_the_mean_down_to_one_texel() {
+        // Odd sizes: every level is the area-weighted mean of the one before, so each
+        // keeps the image's mean (exactly for linear texels, to the 8-bit step for
+        // encoded ones), and the last level is one texel.
+        let (w, h) = (37u32, 20u32);
+        let mut x = 0.618f32;
+        let bytes: Vec<[u8; 4]> = (0..w * h)
+            .map(|_| {
+                x = (x * 997.13 + 0.31).fract();
+                let c = (x * 255.0) as u8;
+                [c, c / 2, 255 - c, c]
+            })
+            .collect();
+        let encoded = Texture::from_srgb8(w, h, bytes).unwrap();
+        let linear = Texture::from_linear(
+            w,
+            h,
+            (0..w * h).map(|k| encoded.texel(k % w, k / w)).collect(),
+        )
+        .unwrap();
+        let mean = |t: &Texture, level: usize| {
+            let (mut lw, mut lh) = (w, h);
+            for _ in 0..level {
+                (lw, lh) = ((lw / 2).max(1), (lh / 2).max(1));
+            }
+            let sum: Vec4 = (0..lw * lh)
+                .map(|k| {
+                    let centre = Vec2::new(
+                        ((k % lw) as f32 + 0.5) / lw as f32,
+                        ((k / lw) as f32 + 0.5) / lh as f32,
+                    );
+                    t.sample_level(centre, level)
+                })
+                .sum();
+            sum / (lw * lh) as f32
+        };
+        assert_eq!(encoded.level_count(), 6); // 37 × 20, 18 × 10, 9 × 5, 4 × 2, 2 × 1, 1 × 1
+        let base = mean(&linear, 0);
+        for level in 1..encoded.level_count() {
+            assert!((mean(&linear, level) - base).abs().max_element() < 1e-5);
+            assert!((mean(&encoded, level) - base).abs().max_element() < 4e-3);
+        }
+        // Beyond the last level reads the last: one texel, the image's mean.
+        let last = encoded.sample_level(Vec2::new(0.3, 0.8), 99);
+        assert!(
+            (last - encoded.sample_level(Vec2::ZERO, 5))
+                .abs()
+                .max_element()
+                < 1e-6
+        );
+        assert!(
+            (last - base).abs().max_element() < 4e-3,
+            "{last} against {base}"
+        );
+        // A one-texel checker reduces to the mean of its linear values, not of its codes.
+        let checker: Vec<[u8; 4]> = (0..16)
+            .map(|k| {
+                if (k % 4 + k / 4) % 2 == 0 {
+                    [0; 4]
+                } else {
+                    [255; 4]
+                }
+            })
+            .collect();
+        let checker = Texture::from_srgb8(4, 4, checker).unwrap();
+        let grey = checker.sample_level(Vec2::new(0.4, 0.1), 1);
+        assert!(
+            (grey - Vec4::splat(0.5)).abs().max_element() < 3e-3,
+            "{grey}"
+        );
     }
 
     #[test]

@@ -50,6 +50,9 @@ pub struct Bvh {
     inv_scale: f32,
     scale: f32,
     tree: Tree,
+    /// Per triangle block, the lanes whose candidates a filtered query's `accept` sees
+    /// ([`Self::filter_only`]); empty: every lane.
+    filtered_lanes: Vec<u8>,
     bvh2: Bvh2,
     level: SimdLevel,
     /// Seconds spent building (PLOC, reinsertion, conversion, triangle blocks).
@@ -64,9 +67,11 @@ struct CanonicalRay {
 }
 
 /// Candidate filter of a traversal: `ANY` stops at the first accepted hit; `accept`
-/// (alpha masks) sees the caller's triangle index and the hit's barycentrics.
+/// (alpha masks) sees the caller's triangle index and the hit's barycentrics, for the
+/// lanes `filtered` marks (all when it is empty).
 struct Filter<'a, const ANY: bool> {
     tree: &'a Tree,
+    filtered: &'a [u8],
     accept: Option<&'a dyn Fn(u32, Vec2) -> bool>,
 }
 
@@ -77,12 +82,21 @@ impl<const ANY: bool> Visit for Filter<'_, ANY> {
     fn accept(&mut self, slot: usize, _t: f32, ray: &TraversalRay) -> bool {
         match self.accept {
             None => true,
+            Some(_) if !lane_is_filtered(self.filtered, slot) => true,
             Some(accept) => accept(
                 self.tree.slot_index[slot],
                 barycentrics(self.tree, slot, ray),
             ),
         }
     }
+}
+
+/// Whether `slot`'s candidates go through `accept` (see [`Filter`]).
+#[inline(always)]
+fn lane_is_filtered(filtered: &[u8], slot: usize) -> bool {
+    filtered
+        .get(slot / LANES)
+        .is_none_or(|&lanes| lanes & (1 << (slot % LANES)) != 0)
 }
 
 /// Barycentrics (u, v) of the ray's hit on slot `slot`, clamped into the triangle.
@@ -125,6 +139,7 @@ impl Bvh {
                 inv_scale: 1.0,
                 scale: 1.0,
                 tree: Tree::default(),
+                filtered_lanes: Vec::new(),
                 bvh2: Bvh2::default(),
                 level,
                 build_seconds: 0.0,
@@ -183,10 +198,32 @@ impl Bvh {
             inv_scale,
             scale,
             tree,
+            filtered_lanes: Vec::new(),
             bvh2,
             level,
             build_seconds: start.elapsed().as_secs_f64(),
         }
+    }
+
+    /// Makes filtered queries ask their `accept` only about candidates on triangles for
+    /// which `filtered(triangle)` holds (the alpha-masked ones) and take every other
+    /// candidate as it is, without reading anything of the caller's per triangle: most
+    /// candidates of a level lie on opaque triangles, and the test read their material.
+    pub fn filter_only(&mut self, filtered: impl Fn(u32) -> bool) {
+        self.filtered_lanes = self
+            .tree
+            .slot_index
+            .chunks(LANES)
+            .map(|lanes| {
+                lanes.iter().enumerate().fold(0u8, |mask, (l, &t)| {
+                    if t != traversal::PADDING && filtered(t) {
+                        mask | (1 << l)
+                    } else {
+                        mask
+                    }
+                })
+            })
+            .collect();
     }
 
     /// Diagonal of the bounding box of all triangles, in world units.
@@ -261,6 +298,7 @@ impl Bvh {
         let mut c = self.canonical(origin, direction, tmin, tmax, true);
         let mut filter = Filter::<false> {
             tree: &self.tree,
+            filtered: &self.filtered_lanes,
             accept,
         };
         let (slot, t) = self.run(&mut c.ray, &mut filter)?;
@@ -293,6 +331,7 @@ impl Bvh {
         let mut c = self.canonical(origin, direction, tmin, tmax, false);
         let mut filter = Filter::<true> {
             tree: &self.tree,
+            filtered: &self.filtered_lanes,
             accept,
         };
         self.run(&mut c.ray, &mut filter).is_some()

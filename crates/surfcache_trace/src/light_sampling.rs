@@ -36,10 +36,24 @@ pub struct LightSample {
     pub direction: Vec3,
     /// Distance to the sampled point (∞ for the environment).
     pub distance: f32,
-    /// Radiance leaving the light towards the shading point.
-    pub radiance: Vec3,
+    /// Radiance leaving an emissive triangle towards the shading point; `None` for the
+    /// environment, whose radiance along `direction` [`Self::radiance`] looks up only
+    /// when it is needed (the lookup is a cache miss in a large map, and most samples of
+    /// an enclosed point are occluded).
+    pub emitted: Option<Vec3>,
     /// Solid-angle density of this direction, light choice included.
     pub pdf: f32,
+}
+
+impl LightSample {
+    /// Radiance arriving along the sample's direction from its source: the emitter's, or
+    /// the environment's at `uv`, the direction's image coordinates
+    /// ([`surfcache_core::environment::direction_to_uv`]).
+    #[inline]
+    pub fn radiance(&self, scene: &TracedScene, uv: Vec2) -> Vec3 {
+        self.emitted
+            .unwrap_or_else(|| scene.environment().radiance_uv(uv))
+    }
 }
 
 impl LightSampler {
@@ -117,7 +131,7 @@ impl LightSampler {
             return Some(LightSample {
                 direction,
                 distance: f32::INFINITY,
-                radiance: scene.environment().radiance(direction),
+                emitted: None,
                 pdf: pdf * self.p_environment,
             });
         }
@@ -157,9 +171,22 @@ impl LightSampler {
         Some(LightSample {
             direction,
             distance,
-            radiance,
+            emitted: Some(radiance),
             pdf,
         })
+    }
+
+    /// Prefetches what [`Self::sample`] will read first for (`select`, `u`) when it
+    /// chooses the environment: the entries of its sampling tables (a cache miss each
+    /// in a large map), so that a light sample drawn after tracing another ray finds
+    /// them in the caches.
+    #[inline]
+    pub fn prefetch(&self, select: f32, u: Vec2) {
+        if let Some(env) = &self.environment
+            && select < self.p_environment
+        {
+            env.prefetch(u);
+        }
     }
 
     /// Density [`Self::sample`] gives direction `w` from `x` when the ray in that direction
@@ -179,11 +206,12 @@ impl LightSampler {
             / (self.emitter_area[k] * cos_light)
     }
 
-    /// Density [`Self::sample`] gives the environment direction `w`.
+    /// Density [`Self::sample`] gives the environment direction whose image coordinates
+    /// are `uv` ([`surfcache_core::environment::direction_to_uv`]).
     #[inline]
-    pub fn pdf_environment(&self, w: Vec3) -> f32 {
+    pub fn pdf_environment(&self, uv: Vec2) -> f32 {
         match &self.environment {
-            Some(env) => self.p_environment * env.pdf(w),
+            Some(env) => self.p_environment * env.pdf_uv(uv),
             None => 0.0,
         }
     }

@@ -8,6 +8,7 @@ use crate::{
 use glam::{Vec2, Vec3};
 use surfcache_core::{
     Light,
+    environment::direction_to_uv,
     geometry::to_world,
     sampling::{Rng, cosine_hemisphere, cosine_hemisphere_pdf},
 };
@@ -38,7 +39,21 @@ pub trait IrradianceLookup: Sync {
     /// holds no value for that side (a back face the bake left out): the path goes on
     /// there as a full path.
     fn irradiance(&self, triangle: u32, uv: Vec2, front: bool) -> Option<Vec3>;
+
+    /// Width in metres over which the albedo at a gathered hit may be averaged: the scale
+    /// at which the cache's E is smooth (half its sample spacing). 0, the default, reads
+    /// the albedo texture at full resolution.
+    fn albedo_footprint(&self) -> f32 {
+        0.0
+    }
 }
+
+/// Angular width (radians) one gather ray stands for: a hit at distance r reads the
+/// albedo averaged over r · `GATHER_ALBEDO_CONE` at most (a ray cone, as texture
+/// filtering does for secondary rays), so that near hits, which a point sees in detail,
+/// keep their texture detail. About the spacing of 1,024 directions over a hemisphere,
+/// √(2π / 1024) ≈ 1/13.
+pub const GATHER_ALBEDO_CONE: f32 = 1.0 / 16.0;
 
 /// What the first segment of a path met, for detecting points buried inside geometry.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -171,12 +186,24 @@ impl TracedScene {
         if tmax <= 0.0 {
             return Vec3::ZERO;
         }
+        // The environment's texels are fetched while the shadow ray is traced, and read
+        // only if it is not occluded.
+        let uv = match ls.emitted {
+            Some(_) => Vec2::ZERO,
+            None => {
+                let uv = direction_to_uv(ls.direction);
+                if let Some(map) = &self.environment().map {
+                    map.prefetch_uv(uv);
+                }
+                uv
+            }
+        };
         *rays += 1;
         if self.occluded(origin, ls.direction, tmax) {
             return Vec3::ZERO;
         }
         let weight = power_heuristic(ls.pdf, pdf_other);
-        ls.radiance * (cos * weight / ls.pdf)
+        ls.radiance(self, uv) * (cos * weight / ls.pdf)
     }
 
     /// One path-traced estimate of L_in(origin, ω): the radiance arriving at `origin` from
@@ -195,7 +222,9 @@ impl TracedScene {
     /// it must be counted in full.
     ///
     /// With `gather`, the path ends at its first hit y that the lookup holds, adding
-    /// ρ/π · E(y) from it (its emission still counts, MIS-weighted as above).
+    /// ρ/π · E(y) from it (its emission still counts, MIS-weighted as above), ρ averaged
+    /// over min([`IrradianceLookup::albedo_footprint`], r · [`GATHER_ALBEDO_CONE`]) at
+    /// distance r ([`TracedScene::albedo_over`]).
     pub fn incident_radiance(
         &self,
         origin: Vec3,
@@ -216,11 +245,17 @@ impl TracedScene {
         loop {
             rays += 1;
             let Some(hit) = self.closest_hit(o, d, f32::INFINITY) else {
+                // Image coordinates once for the radiance and the density (a uniform sky
+                // reads neither).
+                let uv = match self.environment().map {
+                    Some(_) => direction_to_uv(d),
+                    None => Vec2::ZERO,
+                };
                 let mut weight = 1.0;
                 if let Some(p_bsdf) = pdf {
-                    weight = power_heuristic(p_bsdf, self.light_sampler().pdf_environment(d));
+                    weight = power_heuristic(p_bsdf, self.light_sampler().pdf_environment(uv));
                 }
-                radiance += throughput * self.environment().radiance(d) * weight;
+                radiance += throughput * self.environment().radiance_uv(uv) * weight;
                 first_hit.get_or_insert(FirstHit::Miss);
                 break;
             };
@@ -246,12 +281,16 @@ impl TracedScene {
             if options.max_bounces.is_some_and(|b| bounce >= b) {
                 break;
             }
-            let albedo = material.albedo_at(uv0);
-            if albedo == Vec3::ZERO {
+            if let Some(cache) = gather
+                && let Some(e) = cache.irradiance(t, hit.uv, front)
+            {
+                let footprint = cache.albedo_footprint().min(hit.t * GATHER_ALBEDO_CONE);
+                let albedo = self.albedo_over(t, uv0, footprint);
+                radiance += throughput * albedo * core::f32::consts::FRAC_1_PI * e;
                 break;
             }
-            if let Some(e) = gather.and_then(|cache| cache.irradiance(t, hit.uv, front)) {
-                radiance += throughput * albedo * core::f32::consts::FRAC_1_PI * e;
+            let albedo = material.albedo_at(uv0);
+            if albedo == Vec3::ZERO {
                 break;
             }
             let spawn = self.spawn_origin(&p);

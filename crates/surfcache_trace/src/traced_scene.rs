@@ -85,6 +85,9 @@ pub struct TracedScene {
     /// swapped relative to the mesh (to keep the front face counter-clockwise).
     mirrored: Vec<bool>,
     materials: Vec<Arc<Material>>,
+    /// Metres per texel of each material's albedo texture (level 0), over the surfaces it
+    /// covers: √(world area / texel area) summed over its triangles; 0 without one.
+    albedo_texel_size: Vec<f32>,
     lights: Vec<Light>,
     environment: Environment,
     /// Emitters and environment for next-event estimation.
@@ -117,6 +120,7 @@ impl TracedScene {
             instance_keys: Vec::with_capacity(instances),
             mirrored: Vec::with_capacity(instances),
             materials: Vec::new(),
+            albedo_texel_size: Vec::new(),
             lights: scene.lights.clone(),
             environment: scene.environment.clone(),
             light_sampler: LightSampler::default(),
@@ -134,7 +138,15 @@ impl TracedScene {
             .materials
             .iter()
             .any(|m| matches!(m.alpha_mode, AlphaMode::Mask(_)));
+        s.albedo_texel_size = s.albedo_texel_sizes();
         s.bvh = Bvh::build(&s.positions);
+        let masked: Vec<bool> = s
+            .materials
+            .iter()
+            .map(|m| matches!(m.alpha_mode, AlphaMode::Mask(_)))
+            .collect();
+        s.bvh
+            .filter_only(|t| masked[s.material[t as usize] as usize]);
         s.diagonal = s.bvh.scene_diagonal();
         s.light_sampler = LightSampler::new(&s);
         Ok(s)
@@ -200,6 +212,51 @@ impl TracedScene {
         }
         self.instance_triangles
             .push(start..self.positions.len() as u32);
+    }
+
+    /// `albedo_texel_size` of every material: √(Σ world area / Σ texel area) over its
+    /// triangles, the texel area being the UV0 area times the texture's texels.
+    fn albedo_texel_sizes(&self) -> Vec<f32> {
+        let mut sums = vec![(0.0f64, 0.0f64); self.materials.len()];
+        for (t, &m) in self.material.iter().enumerate() {
+            let Some(texture) = &self.materials[m as usize].albedo_texture else {
+                continue;
+            };
+            let [a, b, c] = self.positions[t];
+            let [u, v, w] = self.uv0[t];
+            let texels = texture.width() as f64 * texture.height() as f64;
+            sums[m as usize].0 += 0.5 * (b - a).cross(c - a).length() as f64;
+            sums[m as usize].1 += 0.5 * ((v - u).perp_dot(w - u) as f64).abs() * texels;
+        }
+        sums.iter()
+            .map(|&(world, texel)| {
+                if texel > 0.0 {
+                    (world / texel).sqrt() as f32
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    }
+
+    /// Albedo at barycentrics-mapped `uv0` of triangle `t`, averaged over about `footprint`
+    /// metres: the texture level whose texels are at most that wide
+    /// ([`Material::albedo_at_level`], level ⌊log₂(footprint / texel size)⌋). A gather
+    /// reads ρ · E at a hit from a cache whose E is smooth at that scale, so
+    /// ∫ ρ E = ∫ ρ̄ E up to the covariance of ρ with E's curvature inside the footprint,
+    /// while the full-resolution texture would cost a cache miss per hit (docs/design.md,
+    /// Gathering).
+    #[inline]
+    pub fn albedo_over(&self, t: u32, uv0: Vec2, footprint: f32) -> Vec3 {
+        let m = self.material[t as usize] as usize;
+        let ratio = footprint / self.albedo_texel_size[m];
+        // ⌊log₂ ratio⌋ from the exponent bits (ratio ≥ 2 is a normal float).
+        let level = if (2.0..f32::INFINITY).contains(&ratio) {
+            ((ratio.to_bits() >> 23) - 127) as usize
+        } else {
+            0
+        };
+        self.materials[m].albedo_at_level(uv0, level)
     }
 
     /// The BVH over [`Self::positions`].

@@ -163,6 +163,10 @@ impl IrradianceLookup for MappedLookup {
             _ => Some(Vec3::ZERO),
         }
     }
+
+    fn albedo_footprint(&self) -> f32 {
+        self.cache.albedo_footprint()
+    }
 }
 
 /// A re-bake of a finished bake after an edit (module docs).

@@ -230,27 +230,34 @@ pub fn hemisphere_sample(
     let cosine = focus.is_none() && settings.sampler != Sampler::Uniform;
     let guide = at.guidance.guide.filter(|_| cosine);
     let u = Vec2::new(root[0], root[1]);
-    let mut x = Vec3::ZERO;
-    let mut rays = 0;
+    let light = Vec2::new(root[3], root[4]);
+    // The light sample is drawn after the cosine-weighted path, whose ray gives the
+    // prefetched sampling tables time to arrive (the sample's random numbers are fixed
+    // in advance, so the order changes no result).
     if options.next_event {
-        let light = Vec2::new(root[3], root[4]);
-        x += match (focus, guide) {
-            (None, None) => scene.direct_light_sample(p, origin, root[2], light, &mut rays),
+        scene.light_sampler().prefetch(root[2], light);
+    }
+    let next_event = |rays: &mut u32| {
+        if !options.next_event {
+            return Vec3::ZERO;
+        }
+        match (focus, guide) {
+            (None, None) => scene.direct_light_sample(p, origin, root[2], light, rays),
             (None, Some(g)) => {
                 let (t, b) = orthonormal_basis(p.shading_normal);
-                scene.direct_light_sample_against(p, origin, root[2], light, &mut rays, |cos, w| {
+                scene.direct_light_sample_against(p, origin, root[2], light, rays, |cos, w| {
                     let square = cosine_hemisphere_square(Vec3::new(t.dot(w), b.dot(w), cos));
                     Some(cosine_hemisphere_pdf(cos) * g.density(square))
                 })
             }
             (Some(cone), _) => {
                 let pdf = 1.0 / cone.solid_angle();
-                scene.direct_light_sample_against(p, origin, root[2], light, &mut rays, |_, w| {
+                scene.direct_light_sample_against(p, origin, root[2], light, rays, |_, w| {
                     cone.contains(w).then_some(pdf)
                 })
             }
-        };
-    }
+        }
+    };
     // The point of the square the direction comes from and the guide's density there.
     let (square, density) = match guide {
         Some(g) => g.sample(u),
@@ -283,6 +290,8 @@ pub fn hemisphere_sample(
         if let Some(r) = record {
             r.add(square, 0.0);
         }
+        let mut rays = 0;
+        let x = next_event(&mut rays);
         let path = PathSample {
             rays,
             ..Default::default()
@@ -290,7 +299,7 @@ pub fn hemisphere_sample(
         return (x, path);
     }
     let mut path = scene.incident_radiance(origin, w, Some(pdf), rng, options, at.gather);
-    path.rays += rays;
+    let x = next_event(&mut path.rays);
     let carried = path.radiance * weight;
     if let Some(r) = record {
         r.add(square, luminance(carried));
