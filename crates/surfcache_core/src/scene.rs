@@ -280,19 +280,23 @@ impl Texture {
         if count == 0 || len != count {
             return None;
         }
-        let base = Level {
+        let encoded = matches!(texels, Texels::Srgb8(_));
+        let mut levels = vec![Level {
             width,
             height,
             texels,
-        };
-        let encoded = matches!(base.texels, Texels::Srgb8(_));
-        let mut linear: Vec<Vec4> = (0..count)
-            .map(|k| base.texel(k as u32 % width, k as u32 / width))
-            .collect();
-        let mut levels = vec![base];
+        }];
+        // Linear texels of the last level below the image (the image itself is read
+        // through its decoding rather than copied).
+        let mut linear = Vec::new();
         let (mut w, mut h) = (width, height);
         while w > 1 || h > 1 {
-            let (next, w2, h2) = reduce(&linear, w, h);
+            let (next, w2, h2) = if levels.len() == 1 {
+                let image = &levels[0];
+                reduce(|k| image.texel(k as u32 % w, k as u32 / w), w, h)
+            } else {
+                reduce(|k| linear[k], w, h)
+            };
             levels.push(Level {
                 width: w2,
                 height: h2,
@@ -406,18 +410,20 @@ impl Level {
     }
 }
 
-/// Halves a `w × h` image of linear texels (rounding down, at least 1): each new texel is
+/// Halves a `w × h` image of linear texels, `texel(row-major index)` (rounding down, at least 1): each new texel is
 /// the mean of the old texels under it, weighted by the area they share (a box filter
 /// that keeps the image's mean exactly, odd sizes included).
-fn reduce(texels: &[Vec4], w: u32, h: u32) -> (Vec<Vec4>, u32, u32) {
+fn reduce(texel: impl Fn(usize) -> Vec4, w: u32, h: u32) -> (Vec<Vec4>, u32, u32) {
     let (w2, h2) = ((w / 2).max(1), (h / 2).max(1));
     let (across, down) = (box_weights(w, w2), box_weights(h, h2));
     let rows: Vec<Vec4> = (0..h as usize)
         .flat_map(|j| {
-            let row = &texels[j * w as usize..(j + 1) * w as usize];
-            across
-                .iter()
-                .map(move |taps| taps.iter().map(|&(i, wt)| row[i] * wt).sum::<Vec4>())
+            let (texel, row) = (&texel, j * w as usize);
+            across.iter().map(move |taps| {
+                taps.iter()
+                    .map(|&(i, wt)| texel(row + i) * wt)
+                    .sum::<Vec4>()
+            })
         })
         .collect();
     let out = down
