@@ -181,6 +181,15 @@ impl Environment {
         }
     }
 
+    /// Prefetches what [`Self::radiance_uv`] reads at `uv` ([`EnvironmentMap::prefetch_uv`];
+    /// nothing for a uniform sky).
+    #[inline]
+    pub fn prefetch_uv(&self, uv: Vec2) {
+        if let Some(map) = &self.map {
+            map.prefetch_uv(uv);
+        }
+    }
+
     /// True when the environment delivers no light at all.
     pub fn is_black(&self) -> bool {
         self.intensity == 0.0

@@ -37,23 +37,12 @@ pub struct LightSample {
     /// Distance to the sampled point (∞ for the environment).
     pub distance: f32,
     /// Radiance leaving an emissive triangle towards the shading point; `None` for the
-    /// environment, whose radiance along `direction` [`Self::radiance`] looks up only
-    /// when it is needed (the lookup is a cache miss in a large map, and most samples of
-    /// an enclosed point are occluded).
+    /// environment, whose radiance along `direction` the caller looks up only when it is
+    /// needed ([`surfcache_core::Environment::radiance_uv`]: a cache miss in a large map,
+    /// and most samples of an enclosed point are occluded).
     pub emitted: Option<Vec3>,
     /// Solid-angle density of this direction, light choice included.
     pub pdf: f32,
-}
-
-impl LightSample {
-    /// Radiance arriving along the sample's direction from its source: the emitter's, or
-    /// the environment's at `uv`, the direction's image coordinates
-    /// ([`surfcache_core::environment::direction_to_uv`]).
-    #[inline]
-    pub fn radiance(&self, scene: &TracedScene, uv: Vec2) -> Vec3 {
-        self.emitted
-            .unwrap_or_else(|| scene.environment().radiance_uv(uv))
-    }
 }
 
 impl LightSampler {

@@ -186,24 +186,23 @@ impl TracedScene {
         if tmax <= 0.0 {
             return Vec3::ZERO;
         }
-        // The environment's texels are fetched while the shadow ray is traced, and read
-        // only if it is not occluded.
-        let uv = match ls.emitted {
-            Some(_) => Vec2::ZERO,
-            None => {
-                let uv = direction_to_uv(ls.direction);
-                if let Some(map) = &self.environment().map {
-                    map.prefetch_uv(uv);
-                }
-                uv
-            }
-        };
+        // The sky's texels are fetched while the shadow ray is traced, and read only if
+        // it is not occluded.
+        let sky_uv = ls.emitted.is_none().then(|| {
+            let uv = direction_to_uv(ls.direction);
+            self.environment().prefetch_uv(uv);
+            uv
+        });
         *rays += 1;
         if self.occluded(origin, ls.direction, tmax) {
             return Vec3::ZERO;
         }
         let weight = power_heuristic(ls.pdf, pdf_other);
-        ls.radiance(self, uv) * (cos * weight / ls.pdf)
+        let radiance = match sky_uv {
+            Some(uv) => self.environment().radiance_uv(uv),
+            None => ls.emitted.unwrap_or_default(),
+        };
+        radiance * (cos * weight / ls.pdf)
     }
 
     /// One path-traced estimate of L_in(origin, ω): the radiance arriving at `origin` from
