@@ -249,14 +249,7 @@ impl Bvh {
     }
 
     #[inline(always)]
-    fn canonical(
-        &self,
-        origin: Vec3,
-        direction: Vec3,
-        tmin: f32,
-        tmax: f32,
-        ordered: bool,
-    ) -> CanonicalRay {
+    fn canonical(&self, origin: Vec3, direction: Vec3, tmin: f32, tmax: f32) -> CanonicalRay {
         let o = (Vec3A::from(origin) - self.centre) * self.inv_scale;
         // `+ 0.0` turns −0.0 components into +0.0, so that signs and octants agree.
         let d = Vec3A::from(direction) * self.inv_scale;
@@ -264,7 +257,7 @@ impl Bvh {
         // A unit direction in canonical space: t_world = t_canonical / len.
         let d = d * (1.0 / len) + Vec3A::ZERO;
         CanonicalRay {
-            ray: TraversalRay::new(o.to_array(), d.to_array(), tmin * len, tmax * len, ordered),
+            ray: TraversalRay::new(o.to_array(), d.to_array(), tmin * len, tmax * len),
             t_to_world: 1.0 / len,
         }
     }
@@ -295,7 +288,7 @@ impl Bvh {
         if self.tree.nodes.is_empty() {
             return None;
         }
-        let mut c = self.canonical(origin, direction, tmin, tmax, true);
+        let mut c = self.canonical(origin, direction, tmin, tmax);
         let mut filter = Filter::<false> {
             tree: &self.tree,
             filtered: &self.filtered_lanes,
@@ -328,7 +321,7 @@ impl Bvh {
         if self.tree.nodes.is_empty() {
             return false;
         }
-        let mut c = self.canonical(origin, direction, tmin, tmax, false);
+        let mut c = self.canonical(origin, direction, tmin, tmax);
         let mut filter = Filter::<true> {
             tree: &self.tree,
             filtered: &self.filtered_lanes,

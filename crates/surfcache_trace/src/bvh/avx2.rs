@@ -10,8 +10,8 @@ pub struct Avx2;
 
 impl Kernel for Avx2 {
     #[inline(always)]
-    unsafe fn node_hits(node: &CwBvhNode, ray: &TraversalRay) -> u32 {
-        unsafe { node_hits(node, ray) }
+    unsafe fn node_hits(node: &CwBvhNode, ray: &TraversalRay, near: &mut [f32; 8]) -> u32 {
+        unsafe { node_hits(node, ray, near) }
     }
 
     #[inline(always)]
@@ -29,7 +29,7 @@ impl Kernel for Avx2 {
 /// and the hit mask of §3.2, all children at once.
 #[inline]
 #[target_feature(enable = "avx2")]
-unsafe fn node_hits(node: &CwBvhNode, ray: &TraversalRay) -> u32 {
+unsafe fn node_hits(node: &CwBvhNode, ray: &TraversalRay, near_out: &mut [f32; 8]) -> u32 {
     let (scale, offset) = node_grid(node, ray);
     let base = node as *const CwBvhNode as *const u8;
     // Quantised plane coordinates of the 8 children at byte offset `at`, as f32.
@@ -52,18 +52,15 @@ unsafe fn node_hits(node: &CwBvhNode, ray: &TraversalRay) -> u32 {
         _mm256_min_ps(t(ray.far[0], 0), t(ray.far[1], 1)),
         _mm256_min_ps(t(ray.far[2], 2), _mm256_set1_ps(ray.tmax)),
     );
+    // SAFETY: near_out holds 8 f32.
+    unsafe { _mm256_storeu_ps(near_out.as_mut_ptr(), near) };
     let hit = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LE_OQ>(near, far));
-    // Per child: (meta >> 5) << offset, offset = meta & 31, reordered for internal children.
+    // Per child: (meta >> 5) << (meta & 31).
     // SAFETY: child_meta is 8 bytes.
     let meta = _mm256_cvtepu8_epi32(unsafe {
         _mm_loadl_epi64(node.child_meta.as_ptr() as *const __m128i)
     });
     let offset = _mm256_and_si256(meta, _mm256_set1_epi32(31));
-    let internal = _mm256_cmpgt_epi32(offset, _mm256_set1_epi32(23));
-    let offset = _mm256_xor_si256(
-        offset,
-        _mm256_and_si256(internal, _mm256_set1_epi32(ray.order as i32)),
-    );
     let bits = _mm256_sllv_epi32(_mm256_srli_epi32::<5>(meta), offset);
     let bits = _mm256_and_si256(bits, hit);
     // Horizontal OR of the 8 lanes.

@@ -6,19 +6,23 @@
 //! - **Node test**: the ray against all 8 quantised child boxes of a node at once (slab test
 //!   in the node's local grid, Ylitie §3.1), honouring the ray's `tmin` and `tmax`. The
 //!   near and far planes per axis are picked by byte offset from the ray's direction signs,
-//!   so no per-child select is needed, and the result is the paper's 32-bit hit mask (§3.2):
-//!   internal children in bits 24..31, ordered by the ray's octant (slot ⊕ octant, highest
-//!   bit first = nearest first), leaf triangles in bits 0..23.
-//! - **Stack of node groups** (Ylitie §3.2): a group is a node's child base and its remaining
-//!   child hits, so a node pushes at most one entry; the stack is a fixed array of
-//!   uninitialised entries, never cleared, as deep as the tree.
+//!   so no per-child select is needed. The result is the paper's 32-bit hit mask (§3.2):
+//!   internal children in bits 24..31 by slot, leaf triangles in bits 0..23; and each
+//!   child's entry distance.
 //! - **Triangles**: every node's triangles are copied once after the build into blocks of 8
 //!   in structure-of-arrays form ([`TriangleBlock`], each node's triangles starting a new
 //!   block), and all hit triangles of a node are tested together, 8 lanes at a time, with a
 //!   division-free Möller–Trumbore test; the division `t = T / det` runs only for lanes that
 //!   passed it.
-//! - **Closest hit** shrinks `tmax` as hits are found; **any hit** stops at the first one
-//!   and visits children in slot order (no octant ordering).
+//! - **Closest hit** visits front to back: a node's hit internal children are sorted by
+//!   entry distance, the nearest is fetched while the node's triangles are tested and then
+//!   visited, the others are pushed with their distance, and a popped entry beyond the
+//!   nearest hit so far is skipped. Each accepted hit lowers `tmax`.
+//! - **Any hit** stops at the first accepted hit and needs no order: its stack holds node
+//!   groups (Ylitie §3.2), a node's child base and its remaining child hits, so a node
+//!   pushes at most one entry.
+//! - Both stacks are fixed arrays of uninitialised entries, never cleared, as deep as the
+//!   tree needs.
 //!
 //! The kernels ([`Kernel`]: the node test and the block test) exist as portable scalar code
 //! and as AVX2 code (`super::avx2`), chosen at run time ([`SimdLevel`]). Both evaluate the
@@ -27,7 +31,7 @@
 
 use obvhs::cwbvh::{CwBvh, node::CwBvhNode};
 use std::{mem::MaybeUninit, sync::OnceLock};
-use surfcache_core::index::NO_INDEX;
+use surfcache_core::{index::NO_INDEX, prefetch::prefetch};
 
 /// Barycentric slack of the triangle test: edges shared by two triangles overlap by this
 /// much instead of leaving float-precision cracks that rays slip through.
@@ -37,7 +41,7 @@ pub const EDGE_SLACK: f32 = 1.0 / (1 << 21) as f32;
 pub const LANES: usize = 8;
 
 /// Stack entries kept on the machine stack; deeper trees use a heap stack.
-const STACK: usize = 64;
+const STACK: usize = 256;
 
 /// Slot index of padding lanes in [`Tree::slot_index`]: they hold no triangle.
 pub const PADDING: u32 = NO_INDEX;
@@ -62,9 +66,6 @@ pub struct TraversalRay {
     pub tmin: f32,
     /// Upper end of the interval; closest-hit traversal lowers it to the nearest hit.
     pub tmax: f32,
-    /// Child-order key: octant code `(d.x ≥ 0)·4 + (d.y ≥ 0)·2 + (d.z ≥ 0)` (obvhs'
-    /// `oct_inv4` byte), or 0 for unordered (any-hit) traversal.
-    pub order: u32,
     /// Byte offsets inside a [`CwBvhNode`] of the near planes' quantised coordinates per
     /// axis (`child_min_*` when the direction component is ≥ 0, else `child_max_*`).
     pub near: [usize; 3],
@@ -83,11 +84,10 @@ fn inverse(x: f32) -> f32 {
 }
 
 impl TraversalRay {
-    /// Prepares `origin + t·direction`, `t ∈ [tmin, tmax]`; `ordered` selects octant child
-    /// ordering (closest hit) or slot order (any hit). Directions must have no −0.0
-    /// components (add `+0.0`), so that signs and octants agree.
+    /// Prepares `origin + t·direction`, `t ∈ [tmin, tmax]`. Directions must have no −0.0
+    /// components (add `+0.0`), so that the near and far planes follow the direction's signs.
     #[inline(always)]
-    pub fn new(origin: [f32; 3], direction: [f32; 3], tmin: f32, tmax: f32, ordered: bool) -> Self {
+    pub fn new(origin: [f32; 3], direction: [f32; 3], tmin: f32, tmax: f32) -> Self {
         use std::mem::offset_of;
         let inv_direction = direction.map(inverse);
         let lo = [
@@ -103,18 +103,12 @@ impl TraversalRay {
         let positive = inv_direction.map(|x| x >= 0.0);
         let near = std::array::from_fn(|k| if positive[k] { lo[k] } else { hi[k] });
         let far = std::array::from_fn(|k| if positive[k] { hi[k] } else { lo[k] });
-        let order = if ordered {
-            ((positive[0] as u32) << 2) | ((positive[1] as u32) << 1) | positive[2] as u32
-        } else {
-            0
-        };
         Self {
             origin,
             direction,
             inv_direction,
             tmin,
             tmax,
-            order,
             near,
             far,
         }
@@ -131,7 +125,7 @@ pub trait Kernel {
     ///
     /// # Safety
     /// See the trait.
-    unsafe fn node_hits(node: &CwBvhNode, ray: &TraversalRay) -> u32;
+    unsafe fn node_hits(node: &CwBvhNode, ray: &TraversalRay, near: &mut [f32; 8]) -> u32;
 
     /// Division-free Möller–Trumbore test (Möller & Trumbore 1997) of the ray against the
     /// lanes of `block` selected by `lanes`, with [`EDGE_SLACK`] on the barycentrics: the
@@ -171,20 +165,16 @@ pub fn node_bytes(node: &CwBvhNode) -> &[u8; 80] {
 
 /// Bit of the Ylitie hit mask a hit child `meta` sets: `count << offset` with the
 /// unary triangle count in the top 3 bits of a leaf's meta byte and its first triangle in
-/// the low 5; internal children (offset 24 + slot) are reordered by `order`.
+/// the low 5; an internal child sets bit 24 + its slot.
 #[inline(always)]
-pub fn child_bits(meta: u8, order: u32) -> u32 {
+pub fn child_bits(meta: u8) -> u32 {
     let meta = meta as u32;
-    let mut offset = meta & 31;
-    if offset >= 24 {
-        offset ^= order;
-    }
-    (meta >> 5) << offset
+    (meta >> 5) << (meta & 31)
 }
 
 impl Kernel for Scalar {
     #[inline(always)]
-    unsafe fn node_hits(node: &CwBvhNode, ray: &TraversalRay) -> u32 {
+    unsafe fn node_hits(node: &CwBvhNode, ray: &TraversalRay, near_out: &mut [f32; 8]) -> u32 {
         let bytes = node_bytes(node);
         let (scale, offset) = node_grid(node, ray);
         let mut mask = 0;
@@ -193,11 +183,12 @@ impl Kernel for Scalar {
             let near = plane(ray.near[0], 0)
                 .max(plane(ray.near[1], 1))
                 .max(plane(ray.near[2], 2).max(ray.tmin));
+            near_out[i] = near;
             let far = plane(ray.far[0], 0)
                 .min(plane(ray.far[1], 1))
                 .min(plane(ray.far[2], 2).min(ray.tmax));
             if near <= far {
-                mask |= child_bits(node.child_meta[i], ray.order);
+                mask |= child_bits(node.child_meta[i]);
             }
         }
         mask
@@ -373,11 +364,21 @@ fn depth(nodes: &[CwBvhNode]) -> usize {
 }
 
 /// A node's child base and its pending child hits (bits 24..31) with its `imask` (bits
-/// 0..7): one stack entry.
+/// 0..7): one entry of the any-hit stack.
 #[derive(Clone, Copy)]
 struct Group {
     base: u32,
     bits: u32,
+}
+
+/// One entry of the closest-hit stack: a node's entry distance (its `f32` bits, ≥ 0, so
+/// that entries order like distances) in the high half and its index in the low half.
+type Entry = u64;
+
+/// Entry distance of a closest-hit stack entry.
+#[inline(always)]
+fn entry_distance(e: Entry) -> f32 {
+    f32::from_bits((e >> 32) as u32)
 }
 
 /// What a traversal does with candidate hits.
@@ -399,64 +400,102 @@ pub unsafe fn traverse<K: Kernel, V: Visit>(
     ray: &mut TraversalRay,
     visit: &mut V,
 ) -> Option<(usize, f32)> {
-    if tree.depth <= STACK {
-        let mut stack = [const { MaybeUninit::<Group>::uninit() }; STACK];
-        unsafe { traverse_with::<K, V>(tree, ray, visit, &mut stack) }
+    // At most one group per level is pending (any hit), or 7 entries per level (closest).
+    if V::ANY {
+        with_stack(tree.depth, |stack: &mut [MaybeUninit<Group>]| unsafe {
+            traverse_any::<K, V>(tree, ray, visit, stack)
+        })
     } else {
-        let mut stack = vec![MaybeUninit::<Group>::uninit(); tree.depth];
-        unsafe { traverse_with::<K, V>(tree, ray, visit, &mut stack) }
+        with_stack(
+            7 * tree.depth + 1,
+            |stack: &mut [MaybeUninit<Entry>]| unsafe {
+                traverse_closest::<K, V>(tree, ray, visit, stack)
+            },
+        )
     }
 }
 
+/// Runs `f` on an uninitialised stack of at least `len` entries: on the machine stack
+/// when [`STACK`] entries suffice, else on the heap.
 #[inline(always)]
-unsafe fn traverse_with<K: Kernel, V: Visit>(
+fn with_stack<T: Copy, R>(len: usize, f: impl FnOnce(&mut [MaybeUninit<T>]) -> R) -> R {
+    if len <= STACK {
+        f(&mut [const { MaybeUninit::<T>::uninit() }; STACK])
+    } else {
+        f(&mut vec![MaybeUninit::<T>::uninit(); len])
+    }
+}
+
+/// Tests the hit triangles `pending` (8 lane bits per block, from block `block` on), a
+/// block at a time, and returns the last accepted hit: closest hit lowers `ray.tmax` to
+/// each (`found` says whether one was accepted before, so that a hit at `tmax` counts
+/// only as the first), any hit returns at the first.
+#[inline(always)]
+unsafe fn test_triangles<K: Kernel, V: Visit>(
+    tree: &Tree,
+    ray: &mut TraversalRay,
+    visit: &mut V,
+    mut found: bool,
+    mut pending: u32,
+    mut block: usize,
+) -> Option<(usize, f32)> {
+    let mut best = None;
+    while pending != 0 {
+        let lanes = pending & 0xff;
+        if lanes != 0 {
+            let mut t = [0.0; LANES];
+            // SAFETY: blocks exist for every slot a node names (Tree::new).
+            let b = unsafe { tree.blocks.get_unchecked(block) };
+            let mut hits = unsafe { K::block_hits(b, ray, lanes, &mut t) };
+            while hits != 0 {
+                let l = hits.trailing_zeros() as usize;
+                hits &= hits - 1;
+                let slot = block * LANES + l;
+                if (V::ANY || t[l] < ray.tmax || !found) && visit.accept(slot, t[l], ray) {
+                    best = Some((slot, t[l]));
+                    if V::ANY {
+                        return best;
+                    }
+                    found = true;
+                    ray.tmax = t[l];
+                }
+            }
+        }
+        pending >>= 8;
+        block += 1;
+    }
+    best
+}
+
+/// Any hit: node groups in slot order (Ylitie §3.2), stopping at the first accepted hit.
+#[inline(always)]
+unsafe fn traverse_any<K: Kernel, V: Visit>(
     tree: &Tree,
     ray: &mut TraversalRay,
     visit: &mut V,
     stack: &mut [MaybeUninit<Group>],
 ) -> Option<(usize, f32)> {
     debug_assert!(stack.len() >= tree.depth);
-    let mut best = None;
     let mut sp = 0usize;
-    let root = &tree.nodes[0];
-    let hits = unsafe { K::node_hits(root, ray) };
-    let mut group = Group {
-        base: root.child_base_idx,
-        bits: (hits & 0xff00_0000) | root.imask as u32,
-    };
-    let mut prims = (root.primitive_base_idx, hits & 0x00ff_ffff);
+    let mut near = [0.0; 8];
+    let mut current = 0;
     loop {
-        // All hit triangles of the last node, a block of 8 at a time.
-        let mut pending = prims.1;
-        let mut block = prims.0 as usize / LANES;
-        while pending != 0 {
-            let lanes = pending & 0xff;
-            if lanes != 0 {
-                let mut t = [0.0; LANES];
-                // SAFETY: blocks exist for every slot a node names (Tree::new).
-                let b = unsafe { tree.blocks.get_unchecked(block) };
-                let mut found = unsafe { K::block_hits(b, ray, lanes, &mut t) };
-                while found != 0 {
-                    let l = found.trailing_zeros() as usize;
-                    found &= found - 1;
-                    let slot = block * LANES + l;
-                    if (V::ANY || t[l] < ray.tmax || best.is_none())
-                        && visit.accept(slot, t[l], ray)
-                    {
-                        best = Some((slot, t[l]));
-                        if V::ANY {
-                            return best;
-                        }
-                        ray.tmax = t[l];
-                    }
-                }
-            }
-            pending >>= 8;
-            block += 1;
+        // SAFETY: child indices of a CWBVH node lie inside the node array.
+        let node = unsafe { tree.nodes.get_unchecked(current) };
+        let hits = unsafe { K::node_hits(node, ray, &mut near) };
+        let mut group = Group {
+            base: node.child_base_idx,
+            bits: (hits & 0xff00_0000) | node.imask as u32,
+        };
+        let block = node.primitive_base_idx as usize / LANES;
+        let triangles = hits & 0x00ff_ffff;
+        let hit = unsafe { test_triangles::<K, V>(tree, ray, visit, false, triangles, block) };
+        if hit.is_some() {
+            return hit;
         }
         if group.bits & 0xff00_0000 == 0 {
             if sp == 0 {
-                break;
+                return None;
             }
             sp -= 1;
             // SAFETY: entries below `sp` were written by the push below.
@@ -464,23 +503,96 @@ unsafe fn traverse_with<K: Kernel, V: Visit>(
         }
         let bit = 31 - group.bits.leading_zeros();
         group.bits &= !(1 << bit);
-        let slot = (bit - 24) ^ ray.order;
-        let child = group.base + (group.bits & 0xff & ((1 << slot) - 1)).count_ones();
+        let slot = bit - 24;
+        current = (group.base + (group.bits & 0xff & ((1 << slot) - 1)).count_ones()) as usize;
         if group.bits & 0xff00_0000 != 0 {
             // SAFETY: at most one entry per tree level is pending (stack.len() ≥ depth).
             unsafe { stack.get_unchecked_mut(sp).write(group) };
             sp += 1;
         }
-        // SAFETY: child indices of a CWBVH node lie inside the node array.
-        let node = unsafe { tree.nodes.get_unchecked(child as usize) };
-        let hits = unsafe { K::node_hits(node, ray) };
-        group = Group {
-            base: node.child_base_idx,
-            bits: (hits & 0xff00_0000) | node.imask as u32,
-        };
-        prims = (node.primitive_base_idx, hits & 0x00ff_ffff);
     }
-    best
+}
+
+/// Closest hit, front to back: a node's hit triangles are tested, then its hit internal
+/// children visited nearest first, the others pushed with their entry distance and skipped
+/// when popped beyond the nearest hit found so far.
+#[inline(always)]
+unsafe fn traverse_closest<K: Kernel, V: Visit>(
+    tree: &Tree,
+    ray: &mut TraversalRay,
+    visit: &mut V,
+    stack: &mut [MaybeUninit<Entry>],
+) -> Option<(usize, f32)> {
+    debug_assert!(stack.len() > 7 * tree.depth);
+    let mut best = None;
+    let mut sp = 0usize;
+    let mut current = 0usize;
+    let mut near = [0.0f32; 8];
+    loop {
+        // SAFETY: node indices come from the tree's child bases.
+        let node = unsafe { tree.nodes.get_unchecked(current) };
+        let hits = unsafe { K::node_hits(node, ray, &mut near) };
+        // Hit internal children, sorted nearest first (insertion sort: most nodes hit few).
+        let imask = node.imask as u32;
+        let mut entries = [0 as Entry; 8];
+        let mut n = 0;
+        let mut rest = hits >> 24;
+        while rest != 0 {
+            let slot = rest.trailing_zeros();
+            rest &= rest - 1;
+            let child = node.child_base_idx + (imask & ((1 << slot) - 1)).count_ones();
+            entries[n] = ((near[slot as usize].max(0.0).to_bits() as u64) << 32) | child as u64;
+            n += 1;
+        }
+        for i in 1..n {
+            let e = entries[i];
+            let mut j = i;
+            while j > 0 && entries[j - 1] > e {
+                entries[j] = entries[j - 1];
+                j -= 1;
+            }
+            entries[j] = e;
+        }
+        if n > 0 {
+            // The next node is fetched while the triangles are tested.
+            // SAFETY: as above.
+            let next = unsafe { tree.nodes.get_unchecked(entries[0] as u32 as usize) };
+            prefetch(next);
+            prefetch(&node_bytes(next)[64]);
+        }
+        let block = node.primitive_base_idx as usize / LANES;
+        let triangles = hits & 0x00ff_ffff;
+        let found = best.is_some();
+        if let Some(hit) =
+            unsafe { test_triangles::<K, V>(tree, ray, visit, found, triangles, block) }
+        {
+            best = Some(hit);
+        }
+        while n > 0 && entry_distance(entries[n - 1]) > ray.tmax {
+            n -= 1;
+        }
+        if n == 0 {
+            loop {
+                if sp == 0 {
+                    return best;
+                }
+                sp -= 1;
+                // SAFETY: entries below `sp` were written by the pushes below.
+                let e = unsafe { stack.get_unchecked(sp).assume_init() };
+                if entry_distance(e) <= ray.tmax {
+                    current = e as u32 as usize;
+                    break;
+                }
+            }
+            continue;
+        }
+        for &e in entries[1..n].iter().rev() {
+            // SAFETY: at most 7 entries per tree level are pending (stack.len() > 7·depth).
+            unsafe { stack.get_unchecked_mut(sp).write(e) };
+            sp += 1;
+        }
+        current = entries[0] as u32 as usize;
+    }
 }
 
 /// Instruction sets the traversal kernels exist for.
