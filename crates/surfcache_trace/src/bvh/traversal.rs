@@ -401,28 +401,22 @@ pub unsafe fn traverse<K: Kernel, V: Visit>(
     visit: &mut V,
 ) -> Option<(usize, f32)> {
     // At most one group per level is pending (any hit), or 7 entries per level (closest).
+    // No closures here: they would not inherit the caller's CPU features, and the kernels
+    // would not inline.
     if V::ANY {
-        with_stack(tree.depth, |stack: &mut [MaybeUninit<Group>]| unsafe {
-            traverse_any::<K, V>(tree, ray, visit, stack)
-        })
+        if tree.depth <= STACK {
+            let mut stack = [const { MaybeUninit::<Group>::uninit() }; STACK];
+            unsafe { traverse_any::<K, V>(tree, ray, visit, &mut stack) }
+        } else {
+            let mut stack = vec![MaybeUninit::<Group>::uninit(); tree.depth];
+            unsafe { traverse_any::<K, V>(tree, ray, visit, &mut stack) }
+        }
+    } else if 7 * tree.depth < STACK {
+        let mut stack = [const { MaybeUninit::<Entry>::uninit() }; STACK];
+        unsafe { traverse_closest::<K, V>(tree, ray, visit, &mut stack) }
     } else {
-        with_stack(
-            7 * tree.depth + 1,
-            |stack: &mut [MaybeUninit<Entry>]| unsafe {
-                traverse_closest::<K, V>(tree, ray, visit, stack)
-            },
-        )
-    }
-}
-
-/// Runs `f` on an uninitialised stack of at least `len` entries: on the machine stack
-/// when [`STACK`] entries suffice, else on the heap.
-#[inline(always)]
-fn with_stack<T: Copy, R>(len: usize, f: impl FnOnce(&mut [MaybeUninit<T>]) -> R) -> R {
-    if len <= STACK {
-        f(&mut [const { MaybeUninit::<T>::uninit() }; STACK])
-    } else {
-        f(&mut vec![MaybeUninit::<T>::uninit(); len])
+        let mut stack = vec![MaybeUninit::<Entry>::uninit(); 7 * tree.depth + 1];
+        unsafe { traverse_closest::<K, V>(tree, ray, visit, &mut stack) }
     }
 }
 
