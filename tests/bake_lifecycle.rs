@@ -264,12 +264,15 @@ fn piped_bake_prints_progress_lines() {
         .collect();
     assert!(!progress.is_empty(), "no progress line: {stderr}");
     for line in &progress {
-        // bake: pass P/N, F % done, R Mrays/s[, about T s left] (S s so far)
+        // bake: pass P/N, round K, F % done, R Mrays/s[, about|at least T s left] (S s so far)
         let rest = line.strip_prefix("bake: pass ").unwrap();
         let (pass, rest) = rest.split_once(", ").unwrap();
         let (p, n) = pass.split_once('/').unwrap();
         let (p, n): (u32, u32) = (p.parse().unwrap(), n.parse().unwrap());
         assert!(1 <= p && p <= n, "{line}");
+        let (round, rest) = rest.split_once(", ").unwrap();
+        let round: u32 = round.strip_prefix("round ").unwrap().parse().unwrap();
+        assert!(round >= 1, "{line}");
         let (fraction, rest) = rest.split_once(" % done, ").unwrap();
         let fraction: f64 = fraction.parse().unwrap();
         assert!((0.0..=100.0).contains(&fraction), "{line}");

@@ -232,9 +232,17 @@ impl Progress {
     /// when a step of the job returns.
     fn show(&mut self, status: &BakeStatus, elapsed: Duration) {
         let p = &status.job;
+        // Where the running pass cannot tell what its later rounds will ask (irradiance
+        // maps refine on what they find), the estimate takes the running round for the last
+        // one: the time left is at least that.
+        let bound = if p.current.samples_pending.is_some() {
+            "about"
+        } else {
+            "at least"
+        };
         let eta = status
             .eta_seconds
-            .map(|s| format!(", about {s:.0} s left"))
+            .map(|s| format!(", {bound} {s:.0} s left"))
             .unwrap_or_default();
         match self {
             Progress::Bar(bar) => {
@@ -257,9 +265,10 @@ impl Progress {
                 }
                 *next = now + *every;
                 eprintln!(
-                    "bake: pass {}/{}, {:.1} % done, {:.1} Mrays/s{eta} ({:.0} s so far)",
+                    "bake: pass {}/{}, round {}, {:.1} % done, {:.1} Mrays/s{eta} ({:.0} s so far)",
                     p.pass + 1,
                     p.passes.max(1),
+                    p.current.rounds + 1,
                     100.0 * status.fraction,
                     status.rays_per_second / 1e6,
                     elapsed.as_secs_f64(),

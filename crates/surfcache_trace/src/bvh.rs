@@ -251,7 +251,7 @@ impl Bvh {
     #[inline(always)]
     fn canonical(&self, origin: Vec3, direction: Vec3, tmin: f32, tmax: f32) -> CanonicalRay {
         let o = (Vec3A::from(origin) - self.centre) * self.inv_scale;
-        // `+ 0.0` turns −0.0 components into +0.0, so that signs and octants agree.
+        // `+ 0.0` turns −0.0 components into +0.0, so that the slab planes follow the signs.
         let d = Vec3A::from(direction) * self.inv_scale;
         let len = d.length();
         // A unit direction in canonical space: t_world = t_canonical / len.
@@ -262,14 +262,16 @@ impl Bvh {
         }
     }
 
-    /// Runs the traversal with this BVH's SIMD level.
+    /// Runs the traversal with this BVH's SIMD level; the tree must not be empty (the
+    /// queries return early on an empty tree).
     #[inline(always)]
     fn run<V: Visit>(&self, ray: &mut TraversalRay, visit: &mut V) -> Option<(usize, f32)> {
+        assert!(!self.tree.nodes.is_empty());
         match self.level {
-            // SAFETY: the level is only ever set to one the CPU supports.
+            // SAFETY: the level is only ever set to one the CPU supports; the tree has a root.
             #[cfg(target_arch = "x86_64")]
             SimdLevel::Avx2 => unsafe { traverse_avx2(&self.tree, ray, visit) },
-            // SAFETY: the scalar kernels need no CPU features.
+            // SAFETY: the scalar kernels need no CPU features; the tree has a root.
             _ => unsafe { traverse::<Scalar, V>(&self.tree, ray, visit) },
         }
     }

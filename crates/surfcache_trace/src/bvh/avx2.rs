@@ -25,8 +25,9 @@ impl Kernel for Avx2 {
     }
 }
 
-/// Slab test of the ray against a node's 8 quantised child boxes (Ylitie et al. 2017 §3.1)
-/// and the hit mask of §3.2, all children at once.
+/// Slab test of the ray against a node's 8 quantised child boxes (Ylitie et al. 2017 §3.1),
+/// all children at once: the hit mask of §3.2, and each child's entry distance in
+/// `near_out`.
 #[inline]
 #[target_feature(enable = "avx2")]
 unsafe fn node_hits(node: &CwBvhNode, ray: &TraversalRay, near_out: &mut [f32; 8]) -> u32 {

@@ -121,7 +121,8 @@ impl TraversalRay {
 /// Implementations may require CPU features: call them only from code compiled for those
 /// features on a CPU that has them (see [`SimdLevel::is_supported`]).
 pub trait Kernel {
-    /// The Ylitie hit mask of `node` (see the module doc).
+    /// The Ylitie hit mask of `node` (see the module doc), and each child's entry distance
+    /// `max(tmin, near planes)` in `near` (meaningful for the hit children).
     ///
     /// # Safety
     /// See the trait.
@@ -393,7 +394,8 @@ pub trait Visit {
 /// or for `V::ANY` of the first accepted hit found.
 ///
 /// # Safety
-/// `K`'s CPU features must be present and enabled in the caller.
+/// `K`'s CPU features must be present and enabled in the caller, and `tree` must have a
+/// root node.
 #[inline(always)]
 pub unsafe fn traverse<K: Kernel, V: Visit>(
     tree: &Tree,
