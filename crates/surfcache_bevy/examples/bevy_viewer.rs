@@ -469,8 +469,8 @@ fn show_progress(
         format!("bake failed: {e}")
     } else if status.running {
         let eta = status
-            .eta_seconds
-            .map(|s| format!(", about {s:.0} s left"))
+            .time_left()
+            .map(|t| format!(", {t}"))
             .unwrap_or_default();
         format!(
             "{} bake: {:.1} % done, {:.2} Mrays/s{eta}",

@@ -232,17 +232,9 @@ impl Progress {
     /// when a step of the job returns.
     fn show(&mut self, status: &BakeStatus, elapsed: Duration) {
         let p = &status.job;
-        // Where the running pass cannot tell what its later rounds will ask (irradiance
-        // maps refine on what they find), the estimate takes the running round for the last
-        // one: the time left is at least that.
-        let bound = if p.current.samples_pending.is_some() {
-            "about"
-        } else {
-            "at least"
-        };
         let eta = status
-            .eta_seconds
-            .map(|s| format!(", {bound} {s:.0} s left"))
+            .time_left()
+            .map(|t| format!(", {t}"))
             .unwrap_or_default();
         match self {
             Progress::Bar(bar) => {

@@ -126,6 +126,44 @@ pub struct BakeStatus {
     pub job: JobProgress,
 }
 
+impl BakeStatus {
+    /// The time left as a bake's progress shows it: [`Self::eta_seconds`], which is a
+    /// lower bound where the running pass cannot tell what its later rounds will ask
+    /// (irradiance maps refine on what they find: the estimate takes the running round for
+    /// the last one).
+    ///
+    /// ```
+    /// use surfcache_ecs::BakeStatus;
+    /// let status = BakeStatus { eta_seconds: Some(12.0), ..Default::default() };
+    /// assert_eq!(status.time_left().unwrap().to_string(), "at least 12 s left");
+    /// ```
+    pub fn time_left(&self) -> Option<TimeLeft> {
+        let seconds = self.eta_seconds?;
+        Some(if self.job.current.samples_pending.is_some() {
+            TimeLeft::About(seconds)
+        } else {
+            TimeLeft::AtLeast(seconds)
+        })
+    }
+}
+
+/// Seconds a bake has left ([`BakeStatus::time_left`]); shown as "about N s left" or
+/// "at least N s left".
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TimeLeft {
+    About(f64),
+    AtLeast(f64),
+}
+
+impl std::fmt::Display for TimeLeft {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            TimeLeft::About(s) => write!(f, "about {s:.0} s left"),
+            TimeLeft::AtLeast(s) => write!(f, "at least {s:.0} s left"),
+        }
+    }
+}
+
 /// The finished surface cache of the newest baked scene.
 #[derive(Resource, Default, Clone)]
 pub struct BakedSurfaceCache {

@@ -55,7 +55,7 @@ pub mod plugin;
 pub mod publish;
 pub mod scene_sync;
 
-pub use baking::{BakeConfig, BakeMode, BakeStatus, BakedSurfaceCache, Baking};
+pub use baking::{BakeConfig, BakeMode, BakeStatus, BakedSurfaceCache, Baking, TimeLeft};
 pub use bvh::{BvhBuilds, TracedSceneState};
 pub use components::{
     EnvironmentLight, InstanceName, MeshGeometry, PunctualLight, SurfaceMaterial, WorldTransform,

@@ -262,11 +262,12 @@ impl Bvh {
         }
     }
 
-    /// Runs the traversal with this BVH's SIMD level; the tree must not be empty (the
-    /// queries return early on an empty tree).
+    /// Runs the traversal with this BVH's SIMD level (no hit in an empty tree).
     #[inline(always)]
     fn run<V: Visit>(&self, ray: &mut TraversalRay, visit: &mut V) -> Option<(usize, f32)> {
-        assert!(!self.tree.nodes.is_empty());
+        if self.tree.nodes.is_empty() {
+            return None;
+        }
         match self.level {
             // SAFETY: the level is only ever set to one the CPU supports; the tree has a root.
             #[cfg(target_arch = "x86_64")]
@@ -287,9 +288,6 @@ impl Bvh {
         tmax: f32,
         accept: Option<&dyn Fn(u32, Vec2) -> bool>,
     ) -> Option<Hit> {
-        if self.tree.nodes.is_empty() {
-            return None;
-        }
         let mut c = self.canonical(origin, direction, tmin, tmax);
         let mut filter = Filter::<false> {
             tree: &self.tree,
@@ -320,9 +318,6 @@ impl Bvh {
         tmax: f32,
         accept: Option<&dyn Fn(u32, Vec2) -> bool>,
     ) -> bool {
-        if self.tree.nodes.is_empty() {
-            return false;
-        }
         let mut c = self.canonical(origin, direction, tmin, tmax);
         let mut filter = Filter::<true> {
             tree: &self.tree,

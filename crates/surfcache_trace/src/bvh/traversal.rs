@@ -382,6 +382,13 @@ fn entry_distance(e: Entry) -> f32 {
     f32::from_bits((e >> 32) as u32)
 }
 
+/// Node index of internal child `slot` of a node whose internal children start at `base`
+/// and occupy the slots `imask` marks (CWBVH stores them packed in slot order).
+#[inline(always)]
+fn child_index(base: u32, imask: u32, slot: u32) -> usize {
+    (base + (imask & ((1 << slot) - 1)).count_ones()) as usize
+}
+
 /// What a traversal does with candidate hits.
 pub trait Visit {
     /// Whether to stop at the first accepted hit (any hit) rather than shrink `tmax`.
@@ -500,7 +507,7 @@ unsafe fn traverse_any<K: Kernel, V: Visit>(
         let bit = 31 - group.bits.leading_zeros();
         group.bits &= !(1 << bit);
         let slot = bit - 24;
-        current = (group.base + (group.bits & 0xff & ((1 << slot) - 1)).count_ones()) as usize;
+        current = child_index(group.base, group.bits & 0xff, slot);
         if group.bits & 0xff00_0000 != 0 {
             // SAFETY: at most one entry per tree level is pending (stack.len() ≥ depth).
             unsafe { stack.get_unchecked_mut(sp).write(group) };
@@ -536,7 +543,7 @@ unsafe fn traverse_closest<K: Kernel, V: Visit>(
         while rest != 0 {
             let slot = rest.trailing_zeros();
             rest &= rest - 1;
-            let child = node.child_base_idx + (imask & ((1 << slot) - 1)).count_ones();
+            let child = child_index(node.child_base_idx, imask, slot);
             entries[n] = ((near[slot as usize].max(0.0).to_bits() as u64) << 32) | child as u64;
             n += 1;
         }
