@@ -171,8 +171,9 @@ pub trait SurfaceCache: Send + Sync {
     fn next_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>);
 
     /// Samples the cache expects to ask for in the rounds after the one it last handed
-    /// out, if it can tell (progress reports use it; `None` leaves them counting points).
-    fn later_samples(&self) -> Option<u64> {
+    /// out, if it can tell, where a point takes `samples_per_point` on average (progress
+    /// reports use it; `None` leaves them counting the running round's points).
+    fn later_samples(&self, _samples_per_point: f64) -> Option<u64> {
         None
     }
 
@@ -479,8 +480,8 @@ impl SurfaceCache for Cache {
         self.inner_mut().next_round(scene, points)
     }
 
-    fn later_samples(&self) -> Option<u64> {
-        self.inner().later_samples()
+    fn later_samples(&self, samples_per_point: f64) -> Option<u64> {
+        self.inner().later_samples(samples_per_point)
     }
 
     fn guidance(&self, i: usize) -> Guidance<'_> {

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{Points, bake_synthetic};
+use common::{Points, bake_synthetic, bake_synthetic_watched};
 use std::collections::HashSet;
 use surfcache_cache::stored_rgb::STORED_RGB_BYTES;
 use surfcache_cache::{
@@ -307,6 +307,43 @@ fn refinement_keeps_every_sample_and_asks_only_for_new_ones() {
             }
         }
     }
+}
+
+/// The forecast of later rounds that progress reports use: before the first refinement
+/// test what forced grids will ask (none here: nothing crosses the floor and no punctual
+/// light shines on it); then exact where every grid doubles up to its cap (the
+/// share of tested grids that double stays 1); zero once nothing refines.
+#[test]
+fn later_rounds_are_forecast_from_the_grids_that_double() {
+    let traced = TracedScene::new(&unit_floor()).unwrap();
+    let settings = IrradianceMapSettings {
+        density: 1000.0,
+        max_order: 16,
+        both_sides: false,
+        ..Default::default()
+    };
+    // Curved everywhere: the middle of every coarse edge lies far off the chord.
+    let f = |p: Vec3| Vec3::splat((10.0 * p.x).exp() + (10.0 * p.z).exp());
+    let mut forecasts = Vec::new();
+    let (maps, rounds) = bake_synthetic_watched(
+        &traced,
+        IrradianceMaps::new(&traced, settings),
+        |sp| (f(sp.position), 0.0),
+        |maps| forecasts.push(maps.later_samples(1.0)),
+    );
+    assert_eq!(rounds.len(), 4, "orders 2, 4, 8 and 16");
+    assert_eq!(forecasts[0], Some(0), "nothing forces these grids");
+    for r in 1..rounds.len() {
+        let later: usize = rounds[r + 1..].iter().map(Vec::len).sum();
+        assert_eq!(forecasts[r], Some(later as u64), "after round {r}");
+    }
+    assert_eq!(maps.later_samples(1.0), Some(0));
+    // A linear E: the first test doubles nothing, and nothing is forecast.
+    let (maps, rounds) = bake_synthetic(&traced, IrradianceMaps::new(&traced, settings), |sp| {
+        (Vec3::splat(1.0 + sp.position.x), 0.0)
+    });
+    assert_eq!(rounds.len(), 1);
+    assert_eq!(maps.later_samples(1.0), Some(0));
 }
 
 #[test]

@@ -128,9 +128,9 @@ pub struct BakeStatus {
 
 impl BakeStatus {
     /// The time left as a bake's progress shows it: [`Self::eta_seconds`], which is a
-    /// lower bound where the running pass cannot tell what its later rounds will ask
-    /// (irradiance maps refine on what they find: the estimate takes the running round for
-    /// the last one).
+    /// lower bound where the work still to come is not known ([`JobProgress::work_known`]:
+    /// vertex lighting cannot tell its later rounds, and while the bounce passes of an
+    /// irradiance-map bake run, its final pass' share is a guess).
     ///
     /// ```
     /// use surfcache_ecs::BakeStatus;
@@ -139,7 +139,7 @@ impl BakeStatus {
     /// ```
     pub fn time_left(&self) -> Option<TimeLeft> {
         let seconds = self.eta_seconds?;
-        Some(if self.job.current.samples_pending.is_some() {
+        Some(if self.job.work_known {
             TimeLeft::About(seconds)
         } else {
             TimeLeft::AtLeast(seconds)
@@ -250,6 +250,35 @@ struct Run {
     incremental: bool,
     previous: Option<Arc<EntityTextures>>,
     started: Instant,
+    pace: Pace,
+}
+
+/// The recent rate of samples of a bake: samples done at moments of the last
+/// [`Pace::WINDOW`] seconds. Later rounds of a pass sample other places than its first
+/// (irradiance maps refine into enclosed detail, where rays are shorter) and run faster
+/// per sample (docs/results.md, "Progress of irradiance maps"), so a time left from the
+/// rate since the start would run long.
+#[derive(Default)]
+struct Pace {
+    marks: std::collections::VecDeque<(f64, u64)>,
+}
+
+impl Pace {
+    /// Seconds of marks kept, and the least span a rate is taken over.
+    const WINDOW: f64 = 60.0;
+    const LEAST_SPAN: f64 = 10.0;
+
+    /// Records `samples` done at `seconds`; returns samples per second over the marks
+    /// kept, once they span [`Self::LEAST_SPAN`].
+    fn rate(&mut self, seconds: f64, samples: u64) -> Option<f64> {
+        while self.marks.len() > 1 && self.marks[1].0 <= seconds - Self::WINDOW {
+            self.marks.pop_front();
+        }
+        self.marks.push_back((seconds, samples));
+        let &(t0, s0) = self.marks.front()?;
+        (seconds - t0 >= Self::LEAST_SPAN && samples > s0)
+            .then(|| (samples - s0) as f64 / (seconds - t0))
+    }
 }
 
 impl Run {
@@ -278,9 +307,17 @@ impl Run {
         })
     }
 
-    fn status(&self, progress: &JobProgress) -> BakeStatus {
+    /// The status of the bake at `progress`: the time left from the recent rate of
+    /// samples where the job can tell the samples it still needs, else from its share
+    /// done at the rate since the start.
+    fn status(&mut self, progress: &JobProgress) -> BakeStatus {
         let seconds = self.started.elapsed().as_secs_f64();
         let fraction = progress.fraction();
+        let rate = self.pace.rate(seconds, progress.samples);
+        let eta_seconds = match (progress.samples_left, rate) {
+            (Some(left), Some(rate)) => Some(left as f64 / rate),
+            _ => (fraction > 0.0).then(|| seconds * (1.0 - fraction as f64) / fraction as f64),
+        };
         BakeStatus {
             running: !progress.finished,
             generation: self.generation,
@@ -289,8 +326,7 @@ impl Run {
             samples: progress.samples,
             rays: progress.rays,
             rays_per_second: progress.rays as f64 / seconds.max(1e-9),
-            eta_seconds: (fraction > 0.0)
-                .then(|| seconds * (1.0 - fraction as f64) / fraction as f64),
+            eta_seconds,
             seconds,
             error: None,
             job: *progress,
@@ -462,6 +498,7 @@ pub fn start_bake(
         incremental,
         previous: baking.baseline.as_ref().map(|b| b.published.clone()),
         started: Instant::now(),
+        pace: Pace::default(),
     };
     *status = BakeStatus {
         running: true,
@@ -610,5 +647,34 @@ fn accept(
             status.running = false;
             status.error = Some(e);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Pace;
+
+    #[test]
+    fn pace_is_the_rate_of_the_last_window() {
+        let mut pace = Pace::default();
+        // 100 samples/s for the first 100 s.
+        assert_eq!(pace.rate(0.0, 0), None);
+        assert_eq!(pace.rate(5.0, 500), None, "shorter than the least span");
+        for t in (10..=100).step_by(10) {
+            let rate = pace.rate(t as f64, 100 * t).unwrap();
+            assert!((rate - 100.0).abs() < 1e-9, "{rate} at {t} s");
+        }
+        // Then 300 samples/s: the old marks leave the window, and the rate follows.
+        let mut samples = 10_000;
+        for t in (110..=200).step_by(10) {
+            samples += 3_000;
+            pace.rate(t as f64, samples);
+        }
+        let rate = pace.rate(210.0, samples + 3_000).unwrap();
+        assert!((rate - 300.0).abs() < 1e-9, "{rate}");
+        // No samples for a while: no rate rather than zero or a stale one.
+        let mut pace = Pace::default();
+        pace.rate(0.0, 7);
+        assert_eq!(pace.rate(30.0, 7), None);
     }
 }

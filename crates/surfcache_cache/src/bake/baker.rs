@@ -23,7 +23,8 @@ pub struct BakeProgress {
     pub samples: u64,
     pub rays: u64,
     /// Samples still to take, as far as they can be told: the budgets of the current
-    /// round's pending points and what the cache expects of later rounds
+    /// round's pending points (points without a budget at the samples per point of the
+    /// latest rounds) and what the cache expects of later rounds
     /// ([`SurfaceCache::later_samples`]); `None` where either is unknown.
     pub samples_pending: Option<u64>,
     /// Whether the cache has converged.
@@ -59,6 +60,10 @@ pub struct Baker<C: SurfaceCache> {
     round: Vec<SamplePoint>,
     /// Sample budgets of the round's points not estimated yet (`None` if one has none).
     round_budget: Option<u64>,
+    /// Samples and points of the pass when the running round began, and when the round
+    /// before it began.
+    round_start: (u64, u64),
+    last_round_start: (u64, u64),
     estimates: Vec<Estimate>,
     progress: BakeProgress,
 }
@@ -76,6 +81,8 @@ impl<C: SurfaceCache> Baker<C> {
             previous: None,
             round: Vec::new(),
             round_budget: None,
+            round_start: (0, 0),
+            last_round_start: (0, 0),
             estimates: Vec::new(),
             progress: BakeProgress::default(),
         }
@@ -116,7 +123,9 @@ impl<C: SurfaceCache> Baker<C> {
         if !self.round.is_empty() {
             self.cache.finish_round(scene, &self.round, &self.estimates);
             self.progress.rounds += 1;
+            self.last_round_start = self.round_start;
         }
+        self.round_start = (self.progress.samples, self.progress.points_done);
         self.round.clear();
         self.estimates.clear();
         self.cache.next_round(scene, &mut self.round);
@@ -170,10 +179,24 @@ impl<C: SurfaceCache> Baker<C> {
                 .map(|p| p.budget.unwrap_or(0) as u64)
                 .sum::<u64>();
         }
-        self.progress.samples_pending = self
+        let per_point = self.recent_mean();
+        let round = self
             .round_budget
-            .zip(self.cache.later_samples())
-            .map(|(round, later)| round + later);
+            .unwrap_or((self.progress.points_pending as f64 * per_point) as u64);
+        self.progress.samples_pending = self
+            .cache
+            .later_samples(per_point)
+            .map(|later| later + round);
+    }
+
+    /// Samples per point of the round before the running one and of the running one so
+    /// far: what a point without a budget is expected to take (later rounds sample
+    /// where earlier ones found detail, which takes other samples than the first round's;
+    /// the running round's first points lie in one place and alone would mislead).
+    fn recent_mean(&self) -> f64 {
+        let samples = self.progress.samples - self.last_round_start.0;
+        let points = self.progress.points_done - self.last_round_start.1;
+        samples as f64 / points.max(1) as f64
     }
 
     /// Runs to convergence; `on_step` sees the progress after every step of

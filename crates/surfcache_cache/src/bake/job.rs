@@ -73,12 +73,21 @@ pub struct JobProgress {
     pub rays: u64,
     /// Whether the final cache is complete.
     pub finished: bool,
-    /// Expected work in units of the final pass (0 where a job does not weigh its
-    /// passes: they then count alike): of the passes finished, of the running one, and
-    /// of all passes including those still to come.
+    /// Expected work in units of the final pass, or in samples once the final pass can
+    /// tell the samples it still needs (0 where a job does not weigh its passes: they
+    /// then count alike): of the passes finished, of the running one, and of all passes
+    /// including those still to come.
     pub work_done: f32,
     pub work_running: f32,
     pub work_total: f32,
+    /// Whether the work still to come is known (the running pass can tell its samples,
+    /// and the passes after it are weighed right), so that a time left derived from
+    /// [`Self::fraction`] is an estimate rather than a lower bound.
+    pub work_known: bool,
+    /// Samples the job still needs, where it can tell them: its final pass runs and
+    /// forecasts its rounds. Samples differ in cost between passes and rounds, so a time left is best
+    /// taken from the recent rate of samples (the ECS plugin's `BakeStatus` does).
+    pub samples_left: Option<u64>,
 }
 
 impl JobProgress {
@@ -122,6 +131,7 @@ impl JobProgress {
             self.current = *b.progress();
             self.samples += self.current.samples;
             self.rays += self.current.rays;
+            self.work_known = self.current.samples_pending.is_some();
         }
         self
     }
@@ -423,11 +433,23 @@ impl BakeJob {
 
     /// Progress so far, passes weighed by their expected work: a bounce pass
     /// [`Self::bounce_pass_work`] of the final one, and one more bounce pass expected
-    /// after the running one until the series converges or the passes run out.
+    /// after the running one until the series converges or the passes run out. Once the
+    /// final pass can tell the samples it still needs, every pass weighs its samples
+    /// (the guess of a bounce pass' share is far off where the final cache is not a
+    /// lightmap: docs/results.md, "Progress of irradiance maps").
     pub fn progress(&self) -> JobProgress {
         let mut p = self
             .done
             .with_running(self.passes.len() as u32, self.baker.as_ref());
+        if let Some(pending) = p.current.samples_pending.filter(|_| self.final_pass) {
+            p.work_done = (p.samples - p.current.samples) as f32;
+            p.work_running = (p.current.samples + pending) as f32;
+            p.work_total = p.work_done + p.work_running;
+            p.samples_left = Some(pending);
+            return p;
+        }
+        // Only a lightmap's final pass is weighed right before it runs.
+        p.work_known &= self.final_pass || self.settings.cache.method() == Method::Lightmap;
         let bounce = self.bounce_pass_work();
         let finished = self.passes.len() as f32;
         p.work_done = finished * bounce;

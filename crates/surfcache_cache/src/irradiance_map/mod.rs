@@ -260,6 +260,7 @@ impl IrradianceMaps {
                 shadow_edges,
                 crossed,
                 links,
+                points_per_sample: 1.0,
                 ..Default::default()
             })),
         }
@@ -313,6 +314,15 @@ impl SurfaceCache for IrradianceMaps {
     /// [`Self::ask_new_samples`].
     fn next_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>) {
         self.ask_new_samples(scene, points);
+    }
+
+    /// The forecast of the rounds after the one handed out ([`working::LaterRounds`]).
+    fn later_samples(&self, samples_per_point: f64) -> Option<u64> {
+        let Some(w) = self.working.as_ref() else {
+            return Some(0);
+        };
+        let later = w.later.as_ref()?;
+        Some((later.samples() * w.points_per_sample * samples_per_point) as u64)
     }
 
     /// Moves the samples into the grids' new orders with the round's estimates, fills

@@ -5,6 +5,7 @@
 use super::{
     IrradianceMaps, Working,
     grid::{coarse_neighbours, for_each_new_sample, grid_index, grid_size, order_of_level},
+    working::LaterRounds,
 };
 use crate::burial::Burial;
 use glam::Vec3;
@@ -26,10 +27,13 @@ impl IrradianceMaps {
 
     /// Decides which of the grids that just doubled double again: below their maximum
     /// order, those with both buried and valid samples, those a shadow edge or a
-    /// crossing forces, and those whose interpolation error is above the bound.
+    /// crossing forces, and those whose interpolation error is above the bound. Also
+    /// forecasts the rounds after the next ([`LaterRounds`]).
     pub(super) fn decide_refinement(&self, w: &mut Working) {
         w.refine.iter_mut().for_each(|r| *r = false);
         let bound = self.settings.interpolation_error;
+        let mut later = LaterRounds::default();
+        let (mut tested, mut doubled) = (0u64, 0u64);
         for &g in &w.pending {
             let n = order_of_level(self.levels[g as usize]);
             if n < w.max_orders[g as usize / 2] {
@@ -42,10 +46,21 @@ impl IrradianceMaps {
                     && burial.contains(&Burial::Valid);
                 // An order-1 grid (a re-bake's prior) has no new samples to test: it
                 // doubles.
-                w.refine[g as usize] =
-                    n == 1 || mixed || shadow || self.interpolation_error(w, base, n) > bound;
+                let forced = n == 1 || mixed || shadow;
+                let refine = forced || self.interpolation_error(w, base, n) > bound;
+                w.refine[g as usize] = refine;
+                if !forced {
+                    tested += 1;
+                    doubled += refine as u64;
+                }
+                if refine {
+                    // The next round takes it to 2n.
+                    later.add_grid(2 * n, w.max_orders[g as usize / 2], forced);
+                }
             }
         }
+        later.rate = doubled as f64 / tested.max(1) as f64;
+        w.later = Some(later);
     }
 
     /// The refinement test of a grid of order `n` at `base` that just doubled (or was

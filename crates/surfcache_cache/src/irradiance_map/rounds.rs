@@ -4,6 +4,7 @@
 use super::{
     IrradianceMaps, Working,
     grid::{corner_of, for_each_new_sample, grid_index, grid_size, order_of_level, sample_key},
+    working::LaterRounds,
 };
 use crate::{
     Prior, SamplePoint, SampleSite,
@@ -68,6 +69,16 @@ impl IrradianceMaps {
         }
         let start = points.len();
         let w = &mut **w;
+        if w.later.is_none() {
+            // Before the first test only the forced grids' later rounds are sure.
+            let mut later = LaterRounds::default();
+            for &g in &w.pending {
+                let (_, n) = w.round_orders(g as usize, &self.levels);
+                let forced = w.shadow_edges.get(g as usize).copied().unwrap_or(false);
+                later.add_grid(n, w.max_orders[g as usize / 2], forced);
+            }
+            w.later = Some(later);
+        }
         w.sources.clear();
         w.round_lines.clear();
         w.round_feet.clear();
@@ -141,6 +152,9 @@ impl IrradianceMaps {
             });
         }
         w.pending_points = points.len() - start;
+        if corner_points.is_empty() && !w.sources.is_empty() {
+            w.points_per_sample = w.pending_points as f64 / w.sources.len() as f64;
+        }
     }
 
     /// Packs the filled samples (half floats with a scale for the largest value, feet

@@ -1,7 +1,7 @@
 //! The state of a bake in progress: raw estimates, their errors and burial, and what the
 //! current round asked for; dropped once the maps converge.
 
-use super::grid::order_of_level;
+use super::grid::{grid_size, order_of_level};
 use crate::burial::Burial;
 use glam::Vec3;
 
@@ -55,6 +55,12 @@ pub(super) struct Working {
     pub(super) estimate_id: Vec<u32>,
     /// Estimates received so far, over all rounds.
     pub(super) estimates_seen: u32,
+    /// What the rounds after the next are expected to ask for, once a refinement test
+    /// has run ([`LaterRounds`]).
+    pub(super) later: Option<LaterRounds>,
+    /// Round points per new grid sample in the last round that shared no corners (feet
+    /// add points); 1 before there was one.
+    pub(super) points_per_sample: f64,
     /// An incremental re-bake ([`SurfaceCache::remap`]): its estimates update filtered
     /// values and are not filtered again (module docs, Filtering).
     pub(super) rebake: bool,
@@ -63,6 +69,57 @@ pub(super) struct Working {
     /// [`NO_INDEX`] for a grid without one.
     pub(super) priors: Vec<Vec3>,
     pub(super) prior_offsets: Vec<u32>,
+}
+
+/// A forecast of the grid samples of the rounds after the one handed out (progress
+/// reports, [`SurfaceCache::later_samples`]). Every grid of that round will double up to
+/// its maximum order: a forced grid (module docs, Shadow probes, Buried samples and
+/// Crossings) surely, a tested one in each further round with the share of tested grids
+/// the last test doubled. Before the first test only the forced grids are counted
+/// (some of them turn out buried all over and stop, so that forecast is no lower bound;
+/// docs/results.md, "Progress of irradiance maps").
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(super) struct LaterRounds {
+    /// New samples of forced grids over all later rounds.
+    pub(super) forced: u64,
+    /// New samples of tested grids in the k-th later round (`tested[k - 1]`), if each of
+    /// them doubled every time.
+    pub(super) tested: Vec<u64>,
+    /// The share of tested grids the last test doubled (0 before the first test).
+    pub(super) rate: f64,
+}
+
+impl LaterRounds {
+    /// Counts a grid that the round handed out takes to order `n`, forced or tested,
+    /// with its later doublings up to order `max`.
+    pub(super) fn add_grid(&mut self, n: u32, max: u32, forced: bool) {
+        let (mut m, mut k) = (2 * n, 0);
+        while m <= max {
+            let new = (grid_size(m) - grid_size(m / 2)) as u64;
+            if forced {
+                self.forced += new;
+            } else {
+                if self.tested.len() <= k {
+                    self.tested.push(0);
+                }
+                self.tested[k] += new;
+            }
+            m *= 2;
+            k += 1;
+        }
+    }
+
+    /// Expected new grid samples, `forced + Σ_k rate^k · tested[k−1]` (before the first
+    /// test, the forced grids' alone).
+    pub(super) fn samples(&self) -> f64 {
+        let mut survive = 1.0;
+        let mut total = self.forced as f64;
+        for &t in &self.tested {
+            survive *= self.rate;
+            total += survive * t as f64;
+        }
+        total
+    }
 }
 
 impl Working {

@@ -327,7 +327,8 @@ impl SurfaceCache for Lightmaps {
         }
     }
 
-    fn later_samples(&self) -> Option<u64> {
+    /// A texel's later rounds have budgets of their own: the mean so far is not needed.
+    fn later_samples(&self, _samples_per_point: f64) -> Option<u64> {
         Some(self.later_samples)
     }
 

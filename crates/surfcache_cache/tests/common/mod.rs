@@ -55,8 +55,18 @@ impl Points {
 /// cache and the points of every round.
 pub fn bake_synthetic<C: SurfaceCache>(
     scene: &TracedScene,
+    cache: C,
+    f: impl Fn(&SurfacePoint) -> (Vec3, f32),
+) -> (C, Vec<Vec<SamplePoint>>) {
+    bake_synthetic_watched(scene, cache, f, |_| {})
+}
+
+/// [`bake_synthetic`], showing the cache to `watch` after it handed out each round.
+pub fn bake_synthetic_watched<C: SurfaceCache>(
+    scene: &TracedScene,
     mut cache: C,
     f: impl Fn(&SurfacePoint) -> (Vec3, f32),
+    mut watch: impl FnMut(&C),
 ) -> (C, Vec<Vec<SamplePoint>>) {
     let mut rounds = Vec::new();
     loop {
@@ -65,6 +75,7 @@ pub fn bake_synthetic<C: SurfaceCache>(
         if points.is_empty() {
             return (cache, rounds);
         }
+        watch(&cache);
         let estimates: Vec<Estimate> = points
             .iter()
             .map(|p| {
