@@ -85,8 +85,9 @@ pub struct JobProgress {
     /// [`Self::fraction`] is an estimate rather than a lower bound.
     pub work_known: bool,
     /// Samples the job still needs, where it can tell them: its final pass runs and
-    /// forecasts its rounds. Samples differ in cost between passes and rounds, so a time left is best
-    /// taken from the recent rate of samples (the ECS plugin's `BakeStatus` does).
+    /// forecasts its rounds. Samples differ in cost between passes and rounds, so a time
+    /// left is best taken from the recent rate of samples (the ECS plugin's `BakeStatus`
+    /// does).
     pub samples_left: Option<u64>,
 }
 

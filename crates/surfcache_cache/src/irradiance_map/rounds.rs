@@ -70,7 +70,7 @@ impl IrradianceMaps {
         let start = points.len();
         let w = &mut **w;
         if w.later.is_none() {
-            // Before the first test only the forced grids' later rounds are sure.
+            // Before the first test only the forced grids' later rounds are counted.
             let mut later = LaterRounds::default();
             for &g in &w.pending {
                 let (_, n) = w.round_orders(g as usize, &self.levels);

@@ -55,8 +55,8 @@ pub(super) struct Working {
     pub(super) estimate_id: Vec<u32>,
     /// Estimates received so far, over all rounds.
     pub(super) estimates_seen: u32,
-    /// What the rounds after the next are expected to ask for, once a refinement test
-    /// has run ([`LaterRounds`]).
+    /// What the rounds after the one handed out are expected to ask for ([`LaterRounds`]):
+    /// made with the first round, remade by every refinement test.
     pub(super) later: Option<LaterRounds>,
     /// Round points per new grid sample in the last round that shared no corners (feet
     /// add points); 1 before there was one.
