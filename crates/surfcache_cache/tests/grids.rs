@@ -346,6 +346,98 @@ fn later_rounds_are_forecast_from_the_grids_that_double() {
     assert_eq!(maps.later_samples(1.0), Some(0));
 }
 
+/// An incremental re-bake starts from the grids of the bake before, with their values as
+/// priors. A grid that keeps every prior (the edit cannot reach it) keeps that bake's
+/// order: its priors carry errors at the bound, far below the noise the bake before
+/// tested its own estimates with, and testing them again would double grids that bake had
+/// let be and estimate their new samples from scratch. A grid whose samples the re-bake
+/// estimates again is tested as in any bake.
+#[test]
+fn a_re_bake_keeps_the_order_of_grids_whose_priors_it_kept() {
+    let traced = TracedScene::new(&unit_floor()).unwrap();
+    // Steep around x = 0.4: exact estimates refine the grids to their cap.
+    let f = |x: f32| Vec3::new(1.0 + 4.0 / (1.0 + (-(x - 0.4) * 40.0).exp()), 2.0, 0.5);
+    let settings = IrradianceMapSettings {
+        density: 1000.0,
+        max_order: 16,
+        both_sides: false,
+        ..Default::default()
+    };
+    let estimator = common::estimator(surfcache_trace::Sampler::Best, 0.01, 64, 1024, 0.0);
+    let x_of = |p: &surfcache_cache::SamplePoint| {
+        surfcache_cache::bake::sample_frame(&traced, &p.site)
+            .0
+            .position
+            .x
+    };
+    // The bake before: estimates so noisy (standard error half the value) that no
+    // interpolation error stands out, so every grid stays at its first order.
+    let mut before = IrradianceMaps::new(&traced, settings);
+    let mut points = Vec::new();
+    before.next_round(&traced, &mut points);
+    let noisy: Vec<_> = points
+        .iter()
+        .map(|p| surfcache_trace::Estimate {
+            value: f(x_of(p)),
+            std_error: 0.5 * f(x_of(p)),
+            samples: 64,
+            ..Default::default()
+        })
+        .collect();
+    before.finish_round(&traced, &points, &noisy);
+    points.clear();
+    before.next_round(&traced, &mut points);
+    assert!(points.is_empty(), "the noisy bake refined");
+    let orders = |m: &IrradianceMaps| [m.order(0, true), m.order(1, true)];
+    assert_eq!(orders(&before), [2, 2]);
+
+    // A re-bake that keeps every prior: one round, the same orders and values.
+    let identity = [0u32, 1];
+    let mut kept = before.remap(&traced, &traced, &identity);
+    points.clear();
+    kept.next_round(&traced, &mut points);
+    let unchanged: Vec<_> = points
+        .iter()
+        .map(|p| match p.prior {
+            Some(surfcache_cache::Prior::Estimated(v)) => {
+                surfcache_trace::irradiance::unchanged(v, &estimator)
+            }
+            other => panic!("a remapped grid sample without its estimate: {other:?}"),
+        })
+        .collect();
+    kept.finish_round(&traced, &points, &unchanged);
+    points.clear();
+    kept.next_round(&traced, &mut points);
+    assert!(
+        points.is_empty(),
+        "kept priors asked for {} new samples",
+        points.len()
+    );
+    assert_eq!(orders(&kept), orders(&before));
+    for t in 0..2u32 {
+        for uv in [Vec2::new(0.2, 0.3), Vec2::new(0.5, 0.1), Vec2::ZERO] {
+            assert_eq!(kept.lookup(t, uv, true), before.lookup(t, uv, true));
+        }
+    }
+
+    // A re-bake whose estimates changed (here: exact ones) tests them and refines.
+    let mut changed = before.remap(&traced, &traced, &identity);
+    points.clear();
+    changed.next_round(&traced, &mut points);
+    let exact: Vec<_> = points
+        .iter()
+        .map(|p| surfcache_trace::Estimate {
+            value: f(x_of(p)),
+            samples: 64,
+            ..Default::default()
+        })
+        .collect();
+    changed.finish_round(&traced, &points, &exact);
+    points.clear();
+    changed.next_round(&traced, &mut points);
+    assert!(!points.is_empty(), "changed estimates did not refine");
+}
+
 #[test]
 fn buried_samples_are_filled_from_neighbours_and_counted() {
     let v = Vec3::new;

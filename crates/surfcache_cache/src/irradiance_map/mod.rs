@@ -104,7 +104,14 @@
 //! An incremental re-bake does not filter: its estimates update values that were
 //! filtered when they were made (re-estimated ones meet the bound on their own), and a
 //! changed sample averaged with neighbours that kept their values would lose most of its
-//! change (as lightmaps do, [`crate::lightmap`]).
+//! change (as lightmaps do, [`crate::lightmap`]). Nor does it test grids that kept all
+//! their priors: such a grid keeps the order the bake before chose, since its values are
+//! that bake's, and so were the test and the burial that decided it. Tested anew, priors
+//! (their errors taken at the bound, their burial unknown) doubled grids the bake before
+//! had let be (crossed grids buried all over among them), and every new sample of those
+//! was estimated from scratch (docs/results.md, "Editing a level: irradiance maps").
+//! A grid the edit reaches has samples the re-bake estimates again, and is tested and
+//! forced as in any bake.
 //!
 //! **Storage.** Samples are three half floats (6 bytes, [`crate::stored_rgb`], one
 //! [`StoreScale`] chosen from the largest
@@ -421,6 +428,7 @@ impl SurfaceCache for IrradianceMaps {
             .collect();
         let mut prior_offsets = vec![NO_INDEX; slots];
         let mut priors = Vec::new();
+        let mut prior_feet = Vec::new();
         for g in 0..slots {
             let (t, front) = ((g / 2) as u32, g % 2 == 0);
             let t_old = triangle_map[t as usize];
@@ -433,17 +441,37 @@ impl SurfaceCache for IrradianceMaps {
             }
             start_log2[g] = n.trailing_zeros() as u8;
             prior_offsets[g] = priors.len() as u32;
-            let base = self.offsets[Self::slot(t_old, front)] as usize;
+            let old_slot = Self::slot(t_old, front);
+            let base = self.offsets[old_slot] as usize;
             priors.extend(
                 self.packed[base..base + grid_size(n)]
                     .iter()
                     .map(|&p| self.scale.unpack(p)),
             );
+            // The feet of its samples' crossing lines, with their lines.
+            if let Ok(k) = self
+                .crossed_grids
+                .binary_search_by_key(&(old_slot as u32), |c| c[0])
+            {
+                let first = self.crossed_grids[k][1] as usize;
+                for m in 0..grid_size(n) {
+                    let l = self.sample_lines[first + m];
+                    if l == NO_INDEX {
+                        continue;
+                    }
+                    let line = self.lines[l as usize];
+                    if line.foot < line.site {
+                        let value = self.scale.unpack(self.feet[l as usize]);
+                        prior_feet.push((prior_offsets[g] + m as u32, line, value));
+                    }
+                }
+            }
         }
         if let Some(w) = fresh.working.as_mut() {
             w.start_log2 = start_log2;
             w.priors = priors;
             w.prior_offsets = prior_offsets;
+            w.prior_feet = prior_feet;
             w.rebake = true;
         }
         fresh

@@ -29,6 +29,11 @@ impl IrradianceMaps {
     /// order, those with both buried and valid samples, those a shadow edge or a
     /// crossing forces, and those whose interpolation error is above the bound. Also
     /// forecasts the rounds after the next ([`LaterRounds`]).
+    ///
+    /// A re-bake decides on the samples it estimated again only: the priors it kept are
+    /// the bake before's, whose burial and noise decided their grid's order then (their
+    /// burial is not kept, and their error is taken at the bound). A grid that kept every
+    /// prior keeps its order (module docs, Filtering).
     pub(super) fn decide_refinement(&self, w: &mut Working) {
         w.refine.iter_mut().for_each(|r| *r = false);
         let bound = self.settings.interpolation_error;
@@ -38,12 +43,22 @@ impl IrradianceMaps {
             let n = order_of_level(self.levels[g as usize]);
             if n < w.max_orders[g as usize / 2] {
                 let base = self.offsets[g as usize] as usize;
-                let burial = &w.burial[base..base + grid_size(n)];
-                let mixed =
-                    burial.contains(&Burial::Valid) && burial.iter().any(|&b| b != Burial::Valid);
+                let (mut valid, mut other) = (false, false);
+                for m in base..base + grid_size(n) {
+                    if !w.rebake || w.samples[m] > 0 {
+                        if w.burial[m] == Burial::Valid {
+                            valid = true;
+                        } else {
+                            other = true;
+                        }
+                    }
+                }
+                if w.rebake && !(valid || other) {
+                    continue;
+                }
+                let mixed = valid && other;
                 // A grid buried all over needs no detail, whatever crosses it.
-                let shadow = w.shadow_edges.get(g as usize).copied().unwrap_or(false)
-                    && burial.contains(&Burial::Valid);
+                let shadow = w.shadow_edges.get(g as usize).copied().unwrap_or(false) && valid;
                 // An order-1 grid (a re-bake's prior) has no new samples to test: it
                 // doubles.
                 let forced = n == 1 || mixed || shadow;
@@ -71,7 +86,8 @@ impl IrradianceMaps {
         let eps = self.settings.floor;
         let mut worst = 0.0f32;
         for_each_new_sample(n / 2, n, |i, j, m| {
-            if w.burial[base + m] != Burial::Valid {
+            // Neither buried samples nor a re-bake's kept priors.
+            if w.burial[base + m] != Burial::Valid || (w.rebake && w.samples[base + m] == 0) {
                 return;
             }
             let [[ai, aj], [bi, bj]] = coarse_neighbours(i, j);

@@ -112,6 +112,13 @@ impl IrradianceMaps {
                         w.feet.push(Vec3::NAN);
                     }
                     if let Some(foot) = foot {
+                        // A re-bake's foot on the same line as before starts from its value.
+                        let prior = prior_base.and_then(|b| {
+                            let k = (b + m) as u32;
+                            let i = w.prior_feet.binary_search_by_key(&k, |f| f.0).ok()?;
+                            let (_, old_line, value) = w.prior_feet[i];
+                            (Some(old_line) == crossing).then_some(Prior::Estimated(value))
+                        });
                         w.round_feet.push((line, (points.len() - start) as u32));
                         points.push(SamplePoint {
                             site: SampleSite::Surface {
@@ -120,7 +127,7 @@ impl IrradianceMaps {
                                 front,
                             },
                             key: splitmix64(sample_key ^ crossings::FOOT_KEY),
-                            prior: None,
+                            prior,
                             budget: None,
                         });
                     }
@@ -313,5 +320,6 @@ impl Working {
         // Priors serve the first round only.
         self.priors = Vec::new();
         self.prior_offsets = Vec::new();
+        self.prior_feet = Vec::new();
     }
 }

@@ -2,7 +2,7 @@
 //! current round asked for; dropped once the maps converge.
 
 use super::grid::{grid_size, order_of_level};
-use crate::burial::Burial;
+use crate::{burial::Burial, crossings::SampleCrossing};
 use glam::Vec3;
 
 /// What only baking needs: raw estimates, their errors, burial flags, refinement state.
@@ -69,6 +69,10 @@ pub(super) struct Working {
     /// [`NO_INDEX`] for a grid without one.
     pub(super) priors: Vec<Vec3>,
     pub(super) prior_offsets: Vec<u32>,
+    /// Re-bakes: the feet before the edit, by prior index (ascending), with the line each
+    /// belonged to: a foot keeps its value as its prior where the edited scene gives its
+    /// sample the same line (module docs, Crossings).
+    pub(super) prior_feet: Vec<(u32, SampleCrossing, Vec3)>,
 }
 
 /// A forecast of the grid samples of the rounds after the one handed out (progress

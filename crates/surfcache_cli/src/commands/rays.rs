@@ -25,6 +25,10 @@ pub struct RaysArgs {
     /// Number of rays.
     #[arg(long, default_value_t = 1_000_000)]
     count: usize,
+    /// `surface` rays per origin, one after the other (a point's hemisphere samples, as a
+    /// bake draws them); the count is rounded up to a multiple of it.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    per_point: u32,
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Camera eye and target `ex,ey,ez,tx,ty,tz` [default: inside the scene's bounds,
@@ -52,11 +56,15 @@ pub fn run(args: RaysArgs) -> Result<()> {
     match args.kind.as_str() {
         "surface" => {
             let areas = scene.area_distribution();
-            for _ in 0..args.count {
+            let k = args.per_point as usize;
+            for _ in 0..args.count.div_ceil(k) {
                 let front = rng.next_f32() < 0.5;
                 let p = scene.sample_surface(&areas, rng.next_f32(), rng.next_vec2(), front);
-                let d = to_world(cosine_hemisphere(rng.next_vec2()), p.geometric_normal);
-                push(scene.spawn_origin(&p), d);
+                let origin = scene.spawn_origin(&p);
+                for _ in 0..k {
+                    let d = to_world(cosine_hemisphere(rng.next_vec2()), p.geometric_normal);
+                    push(origin, d);
+                }
             }
         }
         "box" => {
