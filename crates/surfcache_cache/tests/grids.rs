@@ -146,6 +146,23 @@ fn unit_floor() -> Scene {
     }
 }
 
+/// A ramp that is steep around x = 0.4 (exact estimates refine grids up to their cap) and
+/// whose maximum (at x = 1) is already sampled in round 0, so the store's scale never
+/// changes.
+fn steep_ramp(x: f32) -> Vec3 {
+    Vec3::new(1.0 + 4.0 / (1.0 + (-(x - 0.4) * 40.0).exp()), 2.0, 0.5)
+}
+
+/// Front sides only, grids up to order 16 whatever the triangles' size.
+fn front_to_order_16() -> IrradianceMapSettings {
+    IrradianceMapSettings {
+        density: 1000.0,
+        max_order: 16,
+        both_sides: false,
+        ..Default::default()
+    }
+}
+
 /// A triangle no longer than one sample spacing keeps its three corners: one round, three
 /// points per grid, stored and looked up like any other grid (exact for a linear E).
 #[test]
@@ -199,16 +216,8 @@ fn triangles_within_one_sample_spacing_keep_order_one_grids() {
 #[test]
 fn refinement_keeps_every_sample_and_asks_only_for_new_ones() {
     let traced = TracedScene::new(&unit_floor()).unwrap();
-    // A ramp that is steep around x = 0.4 (refines up to the cap) and whose maximum
-    // (at x = 1) is already sampled in round 0, so the store's scale never changes.
-    let f = |x: f32| Vec3::new(1.0 + 4.0 / (1.0 + (-(x - 0.4) * 40.0).exp()), 2.0, 0.5);
-    let settings = IrradianceMapSettings {
-        density: 1000.0,
-        max_order: 16,
-        both_sides: false,
-        ..Default::default()
-    };
-    let mut maps = IrradianceMaps::new(&traced, settings);
+    let f = steep_ramp;
+    let mut maps = IrradianceMaps::new(&traced, front_to_order_16());
     let mut keys = HashSet::new();
     let mut previous: Vec<(u32, u32, Vec<Vec3>)> = Vec::new();
     let mut round = 0;
@@ -316,12 +325,7 @@ fn refinement_keeps_every_sample_and_asks_only_for_new_ones() {
 #[test]
 fn later_rounds_are_forecast_from_the_grids_that_double() {
     let traced = TracedScene::new(&unit_floor()).unwrap();
-    let settings = IrradianceMapSettings {
-        density: 1000.0,
-        max_order: 16,
-        both_sides: false,
-        ..Default::default()
-    };
+    let settings = front_to_order_16();
     // Curved everywhere: the middle of every coarse edge lies far off the chord.
     let f = |p: Vec3| Vec3::splat((10.0 * p.x).exp() + (10.0 * p.z).exp());
     let mut forecasts = Vec::new();
@@ -355,14 +359,7 @@ fn later_rounds_are_forecast_from_the_grids_that_double() {
 #[test]
 fn a_re_bake_keeps_the_order_of_grids_whose_priors_it_kept() {
     let traced = TracedScene::new(&unit_floor()).unwrap();
-    // Steep around x = 0.4: exact estimates refine the grids to their cap.
-    let f = |x: f32| Vec3::new(1.0 + 4.0 / (1.0 + (-(x - 0.4) * 40.0).exp()), 2.0, 0.5);
-    let settings = IrradianceMapSettings {
-        density: 1000.0,
-        max_order: 16,
-        both_sides: false,
-        ..Default::default()
-    };
+    let (f, settings) = (steep_ramp, front_to_order_16());
     let estimator = common::estimator(surfcache_trace::Sampler::Best, 0.01, 64, 1024, 0.0);
     let x_of = |p: &surfcache_cache::SamplePoint| {
         surfcache_cache::bake::sample_frame(&traced, &p.site)
@@ -370,21 +367,27 @@ fn a_re_bake_keeps_the_order_of_grids_whose_priors_it_kept() {
             .position
             .x
     };
+    // Estimates of the ramp with standard errors `noise` × E.
+    let ramp = |points: &[surfcache_cache::SamplePoint], noise: f32| -> Vec<_> {
+        points
+            .iter()
+            .map(|p| {
+                let value = f(x_of(p));
+                surfcache_trace::Estimate {
+                    value,
+                    std_error: noise * value,
+                    samples: 64,
+                    ..Default::default()
+                }
+            })
+            .collect()
+    };
     // The bake before: estimates so noisy (standard error half the value) that no
     // interpolation error stands out, so every grid stays at its first order.
     let mut before = IrradianceMaps::new(&traced, settings);
     let mut points = Vec::new();
     before.next_round(&traced, &mut points);
-    let noisy: Vec<_> = points
-        .iter()
-        .map(|p| surfcache_trace::Estimate {
-            value: f(x_of(p)),
-            std_error: 0.5 * f(x_of(p)),
-            samples: 64,
-            ..Default::default()
-        })
-        .collect();
-    before.finish_round(&traced, &points, &noisy);
+    before.finish_round(&traced, &points, &ramp(&points, 0.5));
     points.clear();
     before.next_round(&traced, &mut points);
     assert!(points.is_empty(), "the noisy bake refined");
@@ -424,15 +427,7 @@ fn a_re_bake_keeps_the_order_of_grids_whose_priors_it_kept() {
     let mut changed = before.remap(&traced, &traced, &identity);
     points.clear();
     changed.next_round(&traced, &mut points);
-    let exact: Vec<_> = points
-        .iter()
-        .map(|p| surfcache_trace::Estimate {
-            value: f(x_of(p)),
-            samples: 64,
-            ..Default::default()
-        })
-        .collect();
-    changed.finish_round(&traced, &points, &exact);
+    changed.finish_round(&traced, &points, &ramp(&points, 0.0));
     points.clear();
     changed.next_round(&traced, &mut points);
     assert!(!points.is_empty(), "changed estimates did not refine");
