@@ -162,6 +162,13 @@ impl SampleCrossing {
         self.distance(at) >= 0.0
     }
 
+    /// Whether the sample has a foot (`foot < site`; otherwise it keeps its own value
+    /// up to the line).
+    #[inline]
+    pub fn has_foot(&self) -> bool {
+        self.foot < self.site
+    }
+
     /// The signed distance of `at` from the line (in the parameterisation's units).
     #[inline]
     pub fn distance(&self, at: Vec2) -> f32 {
@@ -175,7 +182,7 @@ impl SampleCrossing {
     #[inline]
     pub fn value(&self, at: Vec2, e: Vec3, foot: Vec3) -> Vec3 {
         let s = self.distance(at);
-        if self.foot >= self.site || s >= self.site {
+        if !self.has_foot() || s >= self.site {
             return e;
         }
         self.blend(s, e, foot)
@@ -196,7 +203,7 @@ impl SampleCrossing {
         let s = self.distance(at);
         if s.is_nan() || s < 0.0 {
             None
-        } else if self.foot >= self.site || s >= self.site {
+        } else if !self.has_foot() || s >= self.site {
             Some((e, false))
         } else {
             Some((self.blend(s, e, foot), true))

@@ -460,7 +460,7 @@ impl SurfaceCache for IrradianceMaps {
                         continue;
                     }
                     let line = self.lines[l as usize];
-                    if line.foot < line.site {
+                    if line.has_foot() {
                         let value = self.scale.unpack(self.feet[l as usize]);
                         prior_feet.push((prior_offsets[g] + m as u32, line, value));
                     }

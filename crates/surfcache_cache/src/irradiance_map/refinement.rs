@@ -45,7 +45,7 @@ impl IrradianceMaps {
                 let base = self.offsets[g as usize] as usize;
                 let (mut valid, mut other) = (false, false);
                 for m in base..base + grid_size(n) {
-                    if !w.rebake || w.samples[m] > 0 {
+                    if w.decides(m) {
                         if w.burial[m] == Burial::Valid {
                             valid = true;
                         } else {
@@ -87,7 +87,7 @@ impl IrradianceMaps {
         let mut worst = 0.0f32;
         for_each_new_sample(n / 2, n, |i, j, m| {
             // Neither buried samples nor a re-bake's kept priors.
-            if w.burial[base + m] != Burial::Valid || (w.rebake && w.samples[base + m] == 0) {
+            if w.burial[base + m] != Burial::Valid || !w.decides(base + m) {
                 return;
             }
             let [[ai, aj], [bi, bj]] = coarse_neighbours(i, j);

@@ -136,6 +136,13 @@ impl Working {
         }
     }
 
+    /// Whether sample `m` counts in refinement decisions: every sample of a bake; of a
+    /// re-bake only those it estimated again (kept priors are the bake before's, which
+    /// decided on them).
+    pub(super) fn decides(&self, m: usize) -> bool {
+        !self.rebake || self.samples[m] > 0
+    }
+
     /// log2 of the order grid slot `g` starts at: a re-bake's prior order, else
     /// `min(2, n_max)`.
     pub(super) fn start_log2(&self, g: usize) -> u8 {
