@@ -433,11 +433,17 @@ fn a_re_bake_keeps_the_order_of_grids_whose_priors_it_kept() {
     assert!(!points.is_empty(), "changed estimates did not refine");
 }
 
-#[test]
-fn buried_samples_are_filled_from_neighbours_and_counted() {
+/// Where [`floor_under_attic`] is buried: the floor beyond z = 0.6, the attic all over.
+fn buried_in_attic_scene(p: Vec3) -> bool {
+    p.z > 0.6 || p.y > 4.0
+}
+
+/// The unit floor and a second quad far above it (the attic), baked front side only with
+/// synthetic estimates: 1000 where [`buried_in_attic_scene`] (back-face share 0.9), 5 in
+/// the open (0.1).
+fn floor_under_attic() -> (TracedScene, IrradianceMaps) {
     let v = Vec3::new;
     let mut scene = unit_floor();
-    // A second quad far above, buried all over.
     scene.instances.push(Instance::new(
         quad(
             "attic",
@@ -447,18 +453,24 @@ fn buried_samples_are_filled_from_neighbours_and_counted() {
         Material::default(),
     ));
     let traced = TracedScene::new(&scene).unwrap();
-    let buried = |p: Vec3| p.z > 0.6 || p.y > 4.0;
     let settings = IrradianceMapSettings {
         both_sides: false,
         ..Default::default()
     };
     let (maps, _) = bake_synthetic(&traced, IrradianceMaps::new(&traced, settings), |p| {
-        if buried(p.position) {
+        if buried_in_attic_scene(p.position) {
             (Vec3::splat(1000.0), 0.9)
         } else {
             (Vec3::splat(5.0), 0.1)
         }
     });
+    (traced, maps)
+}
+
+#[test]
+fn buried_samples_are_filled_from_neighbours_and_counted() {
+    let (traced, maps) = floor_under_attic();
+    let buried = buried_in_attic_scene;
     let stats = maps.stats();
     // The floor triangles' samples at z > 0.6 of their final order-64 grids (at order 2:
     // 1 of 6 and 3 of 6), and all 12 of the attic's.
@@ -505,6 +517,73 @@ fn buried_samples_are_filled_from_neighbours_and_counted() {
     }
     // The back side was not asked for: it reads zero.
     assert_eq!(maps.lookup(0, Vec2::splat(0.3), false), Vec3::ZERO);
+}
+
+/// A re-bake takes a buried sample's filled value as [`Prior::Filled`]: where the edit
+/// does not reach it (no samples drawn) it stays buried, and a changed neighbour changes
+/// its filled value without making it a source of the next stage's forward rays.
+#[test]
+fn a_re_bake_keeps_buried_samples_buried_and_no_source() {
+    use surfcache_cache::Prior;
+    let (traced, before) = floor_under_attic();
+    let identity: Vec<u32> = (0..traced.triangle_count() as u32).collect();
+    let estimator = common::estimator(surfcache_trace::Sampler::Best, 0.01, 64, 1024, 0.0);
+    // A re-bake whose points get `update` of their prior and of whether it was filled.
+    let re_bake = |update: &dyn Fn(Vec3, bool) -> surfcache_trace::Estimate| {
+        let mut maps = before.remap(&traced, &traced, &identity);
+        let mut points = Vec::new();
+        maps.next_round(&traced, &mut points);
+        let estimates: Vec<_> = points
+            .iter()
+            .map(|p| {
+                let x = surfcache_cache::bake::sample_frame(&traced, &p.site)
+                    .0
+                    .position;
+                let filled = match p.prior {
+                    Some(Prior::Estimated(v)) => (v, false),
+                    Some(Prior::Filled(v)) => (v, true),
+                    None => panic!("a remapped grid sample without its prior"),
+                };
+                assert_eq!(filled.1, buried_in_attic_scene(x), "the prior at {x}");
+                update(filled.0, filled.1)
+            })
+            .collect();
+        maps.finish_round(&traced, &points, &estimates);
+        maps
+    };
+    let unchanged = |v: Vec3, _| surfcache_trace::irradiance::unchanged(v, &estimator);
+    let kept = re_bake(&unchanged);
+    assert_eq!(kept.stats().buried, before.stats().buried);
+    assert!(
+        kept.sample_changes(&traced, &before, &identity, 0.0)
+            .is_empty()
+    );
+
+    // The open floor re-estimated brighter: its samples are sources, the buried ones
+    // (filled anew from their brighter neighbours) are not.
+    let brighter = |v: Vec3, filled: bool| match filled {
+        true => surfcache_trace::irradiance::unchanged(v, &estimator),
+        false => surfcache_trace::Estimate {
+            value: v + Vec3::ONE,
+            std_error: Vec3::splat(0.01),
+            samples: 64,
+            ..Default::default()
+        },
+    };
+    let changed = re_bake(&brighter);
+    assert_eq!(changed.stats().buried, before.stats().buried);
+    let patches = changed.sample_changes(&traced, &before, &identity, 0.0);
+    assert!(!patches.is_empty(), "no source where the floor changed");
+    for p in &patches {
+        let [a, b, c] = traced.positions()[p.triangle as usize];
+        let uv = p.uv.expect("a sample's own point");
+        let x = a * (1.0 - uv.x - uv.y) + b * uv.x + c * uv.y;
+        assert!(
+            !buried_in_attic_scene(x),
+            "a buried sample at {x} is a source"
+        );
+        assert_eq!(p.change, 1.0);
+    }
 }
 
 #[test]

@@ -49,6 +49,7 @@
 //! number of rays is chosen so that this takes a view of the source far smaller than the
 //! allowance allows: [`RAYS_PER_DISC`] rays per disc of radius R on the sources.
 
+use crate::stored_rgb::difference_beyond;
 use glam::{IVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use std::{
@@ -150,6 +151,34 @@ pub struct ChangePatch {
 }
 
 impl ChangePatch {
+    /// One side of `triangle` at `uv`, standing for `area`, whose irradiance went from
+    /// `old` to `after`: its whole change once that is beyond `share`
+    /// ([`difference_beyond`]; infinite where either value is unknown), else `None`.
+    pub fn of_sample(
+        triangle: u32,
+        front: bool,
+        uv: Vec2,
+        area: f32,
+        after: Vec3,
+        old: Vec3,
+        share: f32,
+    ) -> Option<Self> {
+        let change = if !(after - old).is_finite() {
+            f32::INFINITY
+        } else if difference_beyond(after, old, share).max_element() > 0.0 {
+            (after - old).abs().max_element()
+        } else {
+            0.0
+        };
+        (change > 0.0).then_some(Self {
+            triangle,
+            side: if front { Side::Front } else { Side::Back },
+            uv: Some(uv),
+            area,
+            change,
+        })
+    }
+
     /// Both sides of triangle `t` of `scene`, drawn uniformly over it.
     pub fn whole_triangle(scene: &TracedScene, t: u32, change: f32) -> Self {
         let [a, b, c] = scene.positions()[t as usize];

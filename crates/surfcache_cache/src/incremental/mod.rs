@@ -68,7 +68,7 @@ use crate::{
 };
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
-use std::{f32::consts::PI, sync::Arc};
+use std::{f32::consts::PI, sync::Arc, time::Instant};
 use surfcache_core::sampling::{Cone, splitmix64};
 use surfcache_trace::{
     EstimatorSettings, IrradianceLookup, TracedScene, irradiance::CHANGE_ERROR_SHARE,
@@ -180,6 +180,9 @@ pub struct IncrementalJob {
     stages: Vec<Arc<Cache>>,
     /// The running stage's influence.
     influence: Option<Arc<Influence>>,
+    /// When the running stage started, and the seconds its start took (remap, change
+    /// sources, forward rays): reported with `SURFCACHE_TRACE_PASSES`.
+    stage_clock: Option<(Instant, f64)>,
     done: JobProgress,
     result: Option<Arc<Cache>>,
 }
@@ -196,6 +199,7 @@ impl IncrementalJob {
             baker: None,
             stages: Vec::new(),
             influence: None,
+            stage_clock: None,
             done: JobProgress {
                 passes: 1 + INDIRECT_STAGES,
                 ..Default::default()
@@ -338,7 +342,9 @@ impl IncrementalJob {
             return true;
         }
         if self.baker.is_none() {
+            let start = Instant::now();
             self.start_stage(scene);
+            self.stage_clock = Some((start, start.elapsed().as_secs_f64()));
         }
         let Some(cache) = step_pass(
             &mut self.baker,
@@ -352,7 +358,13 @@ impl IncrementalJob {
         if let Some(influence) = self.influence.take()
             && std::env::var_os(TRACE_PASSES_VAR).is_some()
         {
-            eprintln!("[stage {}] {}", self.stage, influence.report());
+            let (start, setup) = self.stage_clock.take().unwrap_or((Instant::now(), 0.0));
+            eprintln!(
+                "[stage {}] {:.1} s (start {setup:.1} s) {}",
+                self.stage,
+                start.elapsed().as_secs_f64(),
+                influence.report()
+            );
         }
         let cache = Arc::new(cache);
         if self.stage < INDIRECT_STAGES {
@@ -444,8 +456,10 @@ pub fn triangle_changes(
 /// The patches whose irradiance changed between `before` (looked up on
 /// `triangle_map[t]`) and `after`, as sources of an indirect stage's forward rays
 /// ([`Influence::of_changes`]): every texel of a lightmap that changed beyond `share`
-/// ([`Lightmaps::texel_changes`](crate::lightmap::Lightmaps::texel_changes)), for the
-/// other caches both sides of every triangle with its largest change `changes[t]`
+/// ([`Lightmaps::texel_changes`](crate::lightmap::Lightmaps::texel_changes)), every
+/// sample of an irradiance map that did
+/// ([`IrradianceMaps::sample_changes`](crate::IrradianceMaps::sample_changes)), for
+/// vertex lighting both sides of every triangle with its largest change `changes[t]`
 /// ([`triangle_changes`]).
 pub fn change_patches(
     scene: &TracedScene,
@@ -455,13 +469,55 @@ pub fn change_patches(
     changes: &[f32],
     share: f32,
 ) -> Vec<ChangePatch> {
-    if let (Cache::Lightmap(a), Cache::Lightmap(b)) = (after, before) {
-        return a.texel_changes(scene, b, triangle_map, share);
+    match (after, before) {
+        (Cache::Lightmap(a), Cache::Lightmap(b)) => {
+            return a.texel_changes(scene, b, triangle_map, share);
+        }
+        (Cache::IrradianceMap(a), Cache::IrradianceMap(b)) => {
+            return a.sample_changes(scene, b, triangle_map, share);
+        }
+        _ => {}
     }
     (0..changes.len() as u32)
         .filter(|&t| changes[t as usize] > 0.0 || changes[t as usize].is_nan())
         .map(|t| ChangePatch::whole_triangle(scene, t, changes[t as usize]))
         .collect()
+}
+
+/// A box (min, max) around every triangle that an edit moved, added or removed: those of
+/// `new` without a counterpart in `old` (`triangle_map`) or with other corners, and those
+/// of `old` that no triangle of `new` maps to. `None` when none did.
+pub fn changed_region(
+    old: &TracedScene,
+    new: &TracedScene,
+    triangle_map: &[u32],
+) -> Option<(Vec3, Vec3)> {
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    let mut add = |corners: [Vec3; 3]| {
+        for p in corners {
+            (lo, hi) = (lo.min(p), hi.max(p));
+        }
+    };
+    let mut kept = vec![false; old.triangle_count()];
+    for (t, &corners) in new.positions().iter().enumerate() {
+        let t_old = triangle_map.get(t).copied().unwrap_or(UNMAPPED);
+        match old.positions().get(t_old as usize) {
+            Some(&before) => {
+                kept[t_old as usize] = true;
+                if before != corners {
+                    add(before);
+                    add(corners);
+                }
+            }
+            None => add(corners),
+        }
+    }
+    for (t_old, &corners) in old.positions().iter().enumerate() {
+        if !kept[t_old] {
+            add(corners);
+        }
+    }
+    (lo.x <= hi.x).then_some((lo, hi))
 }
 
 /// A bound on the change an indirect stage integrates, `ΔL(y) = ρ(y)/π · ΔE(y)` at first
@@ -624,4 +680,28 @@ fn cone_cosine_bound(cone: &Cone, normal: Vec3) -> (f32, f32) {
         (cos_theta * cone.cos_max + sin_theta * sin_half).clamp(0.0, 1.0)
     };
     ((cone.solid_angle() * cos_min).min(PI), cos_min)
+}
+
+/// The Cornell box before and after moving the instances whose name `moved` accepts by
+/// `by`, traced, with the triangle map between them (tests of re-bakes' carried probes).
+#[cfg(test)]
+pub(crate) fn cornell_moved(
+    moved: impl Fn(&str) -> bool,
+    by: Vec3,
+) -> (TracedScene, TracedScene, Vec<u32>) {
+    use surfcache_core::{glam::Affine3A, scenes::cornell};
+    let old_scene = cornell();
+    let mut new_scene = old_scene.clone();
+    for i in &mut new_scene.instances {
+        if moved(&i.name) {
+            i.transform = Affine3A::from_translation(by) * i.transform;
+        }
+    }
+    let old = TracedScene::new(&old_scene).unwrap();
+    let new = TracedScene::new(&new_scene).unwrap();
+    let identity: Vec<Option<u32>> = (0..new.instance_triangles().len() as u32)
+        .map(Some)
+        .collect();
+    let map = crate::triangle_map(&old, &new, &identity);
+    (old, new, map)
 }

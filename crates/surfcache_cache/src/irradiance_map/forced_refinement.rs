@@ -11,14 +11,24 @@ use surfcache_trace::TracedScene;
 /// `min(2, n_max)`). Such a grid refines to its maximum order whatever its samples say:
 /// when all its coarse samples lie on one side of the crossing (the lit overhang of a wall
 /// that pierces its neighbour, the thesis' known failure) they agree, and the refinement
-/// test sees nothing to refine. Costs [`crossings::PROBE_DIRECTIONS`] rays per point.
-pub fn crossed_grids(scene: &TracedScene, max_orders: &[u32], bake: &[bool]) -> Vec<bool> {
+/// test sees nothing to refine. Costs [`crossings::PROBE_DIRECTIONS`] rays per point,
+/// except for the grids whose answer `known` gives (a re-bake's grids that no changed
+/// surface comes near).
+pub fn crossed_grids(
+    scene: &TracedScene,
+    max_orders: &[u32],
+    bake: &[bool],
+    known: impl Fn(usize) -> Option<bool> + Sync,
+) -> Vec<bool> {
     use rayon::prelude::*;
     (0..bake.len())
         .into_par_iter()
         .map(|g| {
             let t = (g / 2) as u32;
-            bake[g] && crossings::grid_crossed(scene, t, g % 2 == 0, max_orders[t as usize].min(2))
+            bake[g]
+                && known(g).unwrap_or_else(|| {
+                    crossings::grid_crossed(scene, t, g % 2 == 0, max_orders[t as usize].min(2))
+                })
         })
         .collect()
 }

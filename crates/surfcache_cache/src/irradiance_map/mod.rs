@@ -111,7 +111,10 @@
 //! had let be (crossed grids buried all over among them), and every new sample of those
 //! was estimated from scratch (docs/results.md, "Editing a level: irradiance maps").
 //! A grid the edit reaches has samples the re-bake estimates again, and is tested and
-//! forced as in any bake.
+//! forced as in any bake. A sample buried before the edit (its value filled in) stays
+//! buried where the edit does not reach it, as does a crossing foot that was; the
+//! indirect stages of a re-bake take no surface away, so there it is never estimated,
+//! and it is no source of their forward rays ([`IrradianceMaps::sample_changes`]).
 //!
 //! **Storage.** Samples are three half floats (6 bytes, [`crate::stored_rgb`], one
 //! [`StoreScale`] chosen from the largest
@@ -176,18 +179,24 @@ pub use sharing::corner_links;
 
 use crate::burial::Burial;
 use crate::{
-    CacheStats, Diagnostic, IrradianceTexture, Method, SamplePoint, SurfaceCache, UNMAPPED,
-    crossings, mesh_colour,
+    CacheStats, Diagnostic, IrradianceTexture, Method, Prior, SamplePoint, SurfaceCache, UNMAPPED,
+    crossings,
+    incremental::{ChangePatch, changed_region},
+    mesh_colour,
     stored_rgb::{STORED_RGB_BYTES, StoreScale, StoredRgb},
 };
 use crossings::SampleCrossing;
 use glam::{Vec2, Vec3};
+use rayon::prelude::*;
 use rounds::grown_layout;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use surfcache_core::{geometry::longest_edge, index::NO_INDEX};
+use surfcache_core::{
+    geometry::{longest_edge, triangle_area},
+    index::NO_INDEX,
+};
 use surfcache_trace::{Estimate, TracedScene};
-use working::Working;
+use working::{SampleProbe, Working};
 
 /// Per-triangle adaptive irradiance maps (module docs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -219,6 +228,16 @@ pub struct IrradianceMaps {
     /// [`NO_INDEX`].
     #[serde(default)]
     sample_lines: Vec<u32>,
+    /// Per stored sample: whether it was buried (its value filled in from neighbours, so
+    /// no surface sees its light and it is no prior for a change estimate). Kept for a
+    /// re-bake of these maps; empty in maps read from a file (then none counts as buried).
+    #[serde(skip)]
+    buried_samples: Vec<bool>,
+    /// Per sample of each crossed grid, as `sample_lines`: its probe, carried by a
+    /// re-bake to grids that no changed surface comes near. Empty in maps read from a
+    /// file (then a re-bake probes again).
+    #[serde(skip)]
+    sample_probes: Vec<SampleProbe>,
     #[serde(skip)]
     working: Option<Box<Working>>,
 }
@@ -227,6 +246,16 @@ impl IrradianceMaps {
     /// Unbaked maps for `scene`: every front side, and the back sides `settings` asks
     /// for, will start at order `min(2, n_max)`.
     pub fn new(scene: &TracedScene, settings: IrradianceMapSettings) -> Self {
+        Self::knowing_crossings(scene, settings, |_| None)
+    }
+
+    /// [`Self::new`], with the grid slots whose crossing `known` gives left unprobed
+    /// ([`crossed_grids`]).
+    fn knowing_crossings(
+        scene: &TracedScene,
+        settings: IrradianceMapSettings,
+        known: impl Fn(usize) -> Option<bool> + Sync,
+    ) -> Self {
         let triangles = scene.triangle_count();
         let max_orders: Vec<u32> = scene
             .positions()
@@ -239,7 +268,7 @@ impl IrradianceMaps {
             })
             .collect();
         let mut shadow_edges = punctual_shadow_edges(scene, &max_orders, &refine);
-        let crossed = crossed_grids(scene, &max_orders, &refine);
+        let crossed = crossed_grids(scene, &max_orders, &refine, known);
         for (forced, &crossed) in shadow_edges.iter_mut().zip(&crossed) {
             *forced |= crossed;
         }
@@ -261,6 +290,8 @@ impl IrradianceMaps {
             feet: Vec::new(),
             crossed_grids: Vec::new(),
             sample_lines: Vec::new(),
+            buried_samples: Vec::new(),
+            sample_probes: Vec::new(),
             working: Some(Box::new(Working {
                 max_orders,
                 refine,
@@ -310,6 +341,56 @@ impl IrradianceMaps {
     pub fn is_converged(&self) -> bool {
         self.working.is_none()
     }
+
+    /// Every stored sample, not buried, whose value changed beyond `share`
+    /// ([`ChangePatch::of_sample`]) against `before` looked up on `triangle_map[t]`: sample
+    /// against sample where the grid kept its order, against `before`'s lookup at the
+    /// sample's grid point elsewhere (zero where the triangle did not exist before).
+    /// Each sample as a [`ChangePatch`] at its grid point on its side, standing for an
+    /// equal share of the triangle's area (the sources of an indirect stage of a re-bake,
+    /// as [`Lightmaps::texel_changes`](crate::lightmap::Lightmaps::texel_changes) gives a
+    /// lightmap's).
+    pub fn sample_changes(
+        &self,
+        scene: &TracedScene,
+        before: &IrradianceMaps,
+        triangle_map: &[u32],
+        share: f32,
+    ) -> Vec<ChangePatch> {
+        (0..self.levels.len())
+            .into_par_iter()
+            .flat_map_iter(|g| {
+                let (t, front) = ((g / 2) as u32, g % 2 == 0);
+                let n = self.order(t, front);
+                let t_old = triangle_map.get(t as usize).copied().unwrap_or(UNMAPPED);
+                let n_old = match t_old {
+                    UNMAPPED => 0,
+                    _ => before.order(t_old, front),
+                };
+                let [a, b, c] = scene.positions()[t as usize];
+                let area = triangle_area(a, b, c) / grid_size(n.max(1)) as f32;
+                let base = self.offsets[g] as usize;
+                (0..=n).flat_map(move |i| {
+                    (0..=n - i).filter_map(move |j| {
+                        let k = base + grid_index(i, j);
+                        // A buried sample's value is filled in from its neighbours: no
+                        // surface sees its light.
+                        if n == 0 || self.buried_samples.get(k) == Some(&true) {
+                            return None;
+                        }
+                        let uv = Vec2::new(i as f32, j as f32) / n as f32;
+                        let after = self.scale.unpack(self.packed[k]);
+                        let old = match (t_old, n_old == n) {
+                            (UNMAPPED, _) => Vec3::ZERO,
+                            (_, true) => before.sample(t_old, front, i, j),
+                            (_, false) => before.lookup(t_old, uv, front),
+                        };
+                        ChangePatch::of_sample(t, front, uv, area, after, old, share)
+                    })
+                })
+            })
+            .collect()
+    }
 }
 
 impl SurfaceCache for IrradianceMaps {
@@ -354,12 +435,19 @@ impl SurfaceCache for IrradianceMaps {
             &self.levels,
             &new_levels,
             &offsets,
+            points,
             estimates,
             self.settings.buried_threshold,
         );
         for &(line, point) in &w.round_feet {
             let e = &estimates[point as usize];
-            w.feet[line as usize] = crossings::foot_value(e);
+            // A re-bake's buried foot that the edit did not reach stays buried.
+            let kept_buried =
+                e.samples == 0 && matches!(points[point as usize].prior, Some(Prior::Filled(_)));
+            w.feet[line as usize] = match kept_buried {
+                true => Vec3::NAN,
+                false => crossings::foot_value(e),
+            };
         }
         estimates.iter().for_each(|e| self.totals.add(e));
         self.levels = new_levels;
@@ -416,12 +504,37 @@ impl SurfaceCache for IrradianceMaps {
     }
 
     /// Every grid of a surviving triangle starts at its order before the edit, all its
-    /// samples asked for again with their values as priors (buried ones with the values
-    /// filled in from their neighbours: the re-bake finds them buried again and refills
-    /// them); grids of new triangles start afresh at order `min(2, n_max)`. Refinement then continues
+    /// samples asked for again with their values as priors (buried ones as
+    /// [`Prior::Filled`]: they stay buried where the edit does not reach them, and are
+    /// estimated afresh where it does); grids of new triangles start afresh at order `min(2, n_max)`. Refinement then continues
     /// as in a full bake, so a grid the edit gave new detail (a shadow edge) doubles.
-    fn remap(&self, _old: &TracedScene, new: &TracedScene, triangle_map: &[u32]) -> Self {
-        let mut fresh = Self::new(new, self.settings);
+    fn remap(&self, old: &TracedScene, new: &TracedScene, triangle_map: &[u32]) -> Self {
+        // A grid's crossings lie within its probes' reach (at most `LINE_REACH` times its
+        // longest edge): a kept triangle that no changed surface comes that near keeps them.
+        let region = changed_region(old, new, triangle_map);
+        let known = |g: usize| {
+            let (t, front) = (g / 2, g.is_multiple_of(2));
+            let t_old = *triangle_map.get(t)?;
+            let corners = new.positions()[t];
+            if t_old == UNMAPPED
+                || old.positions().get(t_old as usize) != Some(&corners)
+                || self.order(t_old, front) == 0
+            {
+                return None;
+            }
+            if let Some((lo, hi)) = region {
+                let [a, b, c] = corners;
+                let reach = Vec3::splat(
+                    crossings::LINE_REACH * longest_edge(a, b, c) + 4.0 * new.spawn_offset(),
+                );
+                let (t_lo, t_hi) = (a.min(b).min(c) - reach, a.max(b).max(c) + reach);
+                if t_lo.cmple(hi).all() && t_hi.cmpge(lo).all() {
+                    return None;
+                }
+            }
+            Some(self.is_crossed(t_old, front))
+        };
+        let mut fresh = Self::knowing_crossings(new, self.settings, known);
         let slots = fresh.levels.len();
         let mut start_log2: Vec<u8> = (0..slots)
             .map(|g| fresh.working.as_ref().map_or(1, |w| w.start_log2(g)))
@@ -429,6 +542,8 @@ impl SurfaceCache for IrradianceMaps {
         let mut prior_offsets = vec![NO_INDEX; slots];
         let mut priors = Vec::new();
         let mut prior_feet = Vec::new();
+        let mut prior_probe_offsets = vec![NO_INDEX; slots];
+        let mut prior_probes = Vec::new();
         for g in 0..slots {
             let (t, front) = ((g / 2) as u32, g % 2 == 0);
             let t_old = triangle_map[t as usize];
@@ -443,27 +558,37 @@ impl SurfaceCache for IrradianceMaps {
             prior_offsets[g] = priors.len() as u32;
             let old_slot = Self::slot(t_old, front);
             let base = self.offsets[old_slot] as usize;
-            priors.extend(
-                self.packed[base..base + grid_size(n)]
-                    .iter()
-                    .map(|&p| self.scale.unpack(p)),
-            );
+            priors.extend((base..base + grid_size(n)).map(|k| {
+                let value = self.scale.unpack(self.packed[k]);
+                match self.buried_samples.get(k) {
+                    Some(true) => Prior::Filled(value),
+                    _ => Prior::Estimated(value),
+                }
+            }));
             // The feet of its samples' crossing lines, with their lines.
             if let Ok(k) = self
                 .crossed_grids
                 .binary_search_by_key(&(old_slot as u32), |c| c[0])
             {
                 let first = self.crossed_grids[k][1] as usize;
+                // Its samples' probes, where no changed surface comes near.
+                let probes = self.sample_probes.get(first..first + grid_size(n));
+                if let (Some(probes), Some(true)) = (probes, known(g)) {
+                    prior_probe_offsets[g] = prior_probes.len() as u32;
+                    prior_probes.extend_from_slice(probes);
+                }
                 for m in 0..grid_size(n) {
                     let l = self.sample_lines[first + m];
                     if l == NO_INDEX {
                         continue;
                     }
+                    // A line settled without a foot had a buried one: NaN.
                     let line = self.lines[l as usize];
-                    if line.has_foot() {
-                        let value = self.scale.unpack(self.feet[l as usize]);
-                        prior_feet.push((prior_offsets[g] + m as u32, line, value));
-                    }
+                    let value = match line.has_foot() {
+                        true => self.scale.unpack(self.feet[l as usize]),
+                        false => Vec3::NAN,
+                    };
+                    prior_feet.push((prior_offsets[g] + m as u32, line, value));
                 }
             }
         }
@@ -472,6 +597,8 @@ impl SurfaceCache for IrradianceMaps {
             w.priors = priors;
             w.prior_offsets = prior_offsets;
             w.prior_feet = prior_feet;
+            w.prior_probes = prior_probes;
+            w.prior_probe_offsets = prior_probe_offsets;
             w.rebake = true;
         }
         fresh
@@ -528,5 +655,62 @@ impl SurfaceCache for IrradianceMaps {
                 }
             },
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::incremental::cornell_moved;
+
+    /// A re-bake carries the crossings of the grids that no changed surface comes near
+    /// and probes the others: together they must be the crossings of the edited scene.
+    #[test]
+    fn carried_crossings_are_the_crossings_of_the_edited_scene() {
+        // Both blocks lifted 10 cm off the floor: the floor, which keeps its triangles,
+        // is no longer crossed.
+        let (old, new, map) = cornell_moved(|name| name.ends_with("_block"), Vec3::Y * 0.1);
+        let settings = IrradianceMapSettings::default();
+        // Baked with a constant E: only forced grids refine.
+        let mut before = IrradianceMaps::new(&old, settings);
+        let mut points = Vec::new();
+        loop {
+            points.clear();
+            before.next_round(&old, &mut points);
+            if points.is_empty() {
+                break;
+            }
+            let e = Estimate {
+                value: Vec3::ONE,
+                samples: 1,
+                ..Default::default()
+            };
+            before.finish_round(&old, &points, &vec![e; points.len()]);
+        }
+        let crossed = |m: &IrradianceMaps| m.working.as_ref().unwrap().crossed.clone();
+        let carried = crossed(&before.remap(&old, &new, &map));
+        let fresh = crossed(&IrradianceMaps::new(&new, settings));
+        assert_eq!(carried, fresh);
+
+        // Where nothing changed (as in a re-bake's indirect stages) every crossed grid
+        // carries its samples' probes: they must be the ones probing gives.
+        let same: Vec<u32> = (0..old.triangle_count() as u32).collect();
+        let mut remapped = before.remap(&old, &old, &same);
+        let mut probed = remapped.clone();
+        let w = probed.working.as_mut().unwrap();
+        assert!(!w.prior_probes.is_empty(), "no probe carried");
+        w.prior_probe_offsets = Vec::new();
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        remapped.next_round(&old, &mut a);
+        probed.next_round(&old, &mut b);
+        assert_eq!(a, b);
+        assert_eq!(remapped.lines, probed.lines);
+        assert!(!remapped.lines.is_empty());
+
+        let unchanged = |t: usize| old.positions()[map[t] as usize] == new.positions()[t];
+        let moved_off: Vec<usize> = (0..fresh.len())
+            .filter(|&g| unchanged(g / 2) && before.is_crossed(map[g / 2], g % 2 == 0) != fresh[g])
+            .collect();
+        assert!(!moved_off.is_empty(), "no kept grid changed its crossing");
     }
 }

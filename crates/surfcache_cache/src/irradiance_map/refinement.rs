@@ -32,7 +32,7 @@ impl IrradianceMaps {
     ///
     /// A re-bake decides on the samples it estimated again only: the priors it kept are
     /// the bake before's, whose burial and noise decided their grid's order then (their
-    /// burial is not kept, and their error is taken at the bound). A grid that kept every
+    /// error is taken at the bound). A grid that kept every
     /// prior keeps its order (module docs, Filtering).
     pub(super) fn decide_refinement(&self, w: &mut Working) {
         w.refine.iter_mut().for_each(|r| *r = false);

@@ -4,7 +4,7 @@
 use super::{
     IrradianceMaps, Working,
     grid::{corner_of, for_each_new_sample, grid_index, grid_size, order_of_level, sample_key},
-    working::LaterRounds,
+    working::{LaterRounds, SampleProbe},
 };
 use crate::{
     Prior, SamplePoint, SampleSite,
@@ -22,22 +22,30 @@ use surfcache_trace::{Estimate, TracedScene};
 /// [`SurfaceCache::next_round`] visits them: each sample's site (a sample on a crossing
 /// surface moves just beyond it, as lightmap texels do) and its crossing line, oriented
 /// from the site, in barycentric coordinates.
-fn probe_new_samples(
-    scene: &TracedScene,
-    w: &Working,
-    levels: &[u8],
-) -> Vec<(Vec2, Option<SampleCrossing>, Option<Vec2>)> {
+fn probe_new_samples(scene: &TracedScene, w: &Working, levels: &[u8]) -> Vec<SampleProbe> {
+    // Per sample: its grid slot, its grid point, and the probe a re-bake carries for it.
     let mut sites = Vec::new();
     for &g in w.pending.iter().filter(|&&g| w.crossed[g as usize]) {
         let (coarse, n) = w.round_orders(g as usize, levels);
         let inv = 1.0 / n as f32;
-        for_each_new_sample(coarse, n, |i, j, _| {
-            sites.push((g, Vec2::new(i as f32 * inv, j as f32 * inv)));
+        let carried = match w.prior_probe_offsets.get(g as usize) {
+            Some(&o) if coarse == 0 && o != NO_INDEX => o,
+            _ => NO_INDEX,
+        };
+        for_each_new_sample(coarse, n, |i, j, m| {
+            let prior = match carried {
+                NO_INDEX => NO_INDEX,
+                o => o + m as u32,
+            };
+            sites.push((g, Vec2::new(i as f32 * inv, j as f32 * inv), prior));
         });
     }
     sites
         .par_iter()
-        .map(|&(g, uv)| {
+        .map(|&(g, uv, prior)| {
+            if prior != NO_INDEX {
+                return w.prior_probes[prior as usize];
+            }
             let (t, front) = (g / 2, g % 2 == 0);
             let [a, b, c] = scene.positions()[t as usize];
             let reach =
@@ -81,6 +89,7 @@ impl IrradianceMaps {
         }
         w.sources.clear();
         w.round_lines.clear();
+        w.round_probes.clear();
         w.round_feet.clear();
         let mut probed = probe_new_samples(scene, w, &self.levels).into_iter();
         // Round point of each corner asked for in this round (only rounds that make
@@ -102,9 +111,13 @@ impl IrradianceMaps {
             for_each_new_sample(coarse, n, |i, j, m| {
                 let mut uv = Vec2::new(i as f32 * inv, j as f32 * inv);
                 let mut line = NO_INDEX;
+                let mut probe = NO_INDEX;
                 let sample_key = sample_key(key, front, i, j, n);
                 if crossed {
-                    let (site, crossing, foot) = probed.next().expect("one probe per new sample");
+                    let made = probed.next().expect("one probe per new sample");
+                    probe = w.probes.len() as u32;
+                    w.probes.push(made);
+                    let (site, crossing, foot) = made;
                     uv = site;
                     if let Some(l) = crossing {
                         line = self.lines.len() as u32;
@@ -112,12 +125,24 @@ impl IrradianceMaps {
                         w.feet.push(Vec3::NAN);
                     }
                     if let Some(foot) = foot {
-                        // A re-bake's foot on the same line as before starts from its value.
+                        // A re-bake's foot on the same line as before starts from its
+                        // value; one that was buried (its line settled without a foot,
+                        // `crossings::settle_feet`) stays buried unless the stage
+                        // estimates it.
                         let prior = prior_base.and_then(|b| {
                             let k = (b + m) as u32;
                             let i = w.prior_feet.binary_search_by_key(&k, |f| f.0).ok()?;
                             let (_, old_line, value) = w.prior_feet[i];
-                            (Some(old_line) == crossing).then_some(Prior::Estimated(value))
+                            let line = crossing?;
+                            if value.is_nan() {
+                                let settled = SampleCrossing {
+                                    foot: line.site,
+                                    ..line
+                                };
+                                (settled == old_line).then_some(Prior::Filled(Vec3::ZERO))
+                            } else {
+                                (old_line == line).then_some(Prior::Estimated(value))
+                            }
                         });
                         w.round_feet.push((line, (points.len() - start) as u32));
                         points.push(SamplePoint {
@@ -133,6 +158,7 @@ impl IrradianceMaps {
                     }
                 }
                 w.round_lines.push(line);
+                w.round_probes.push(probe);
                 let corner = match (coarse, corner_of(i, j, n)) {
                     (0, Some(k)) if !corner_points.is_empty() => Some(3 * g as usize + k),
                     _ => None,
@@ -153,7 +179,7 @@ impl IrradianceMaps {
                         front,
                     },
                     key: sample_key,
-                    prior: prior_base.map(|b| Prior::Estimated(w.priors[b + m])),
+                    prior: prior_base.map(|b| w.priors[b + m]),
                     budget: None,
                 });
             });
@@ -179,16 +205,25 @@ impl IrradianceMaps {
         self.packed
             .extend(w.filled.iter().map(|&v| self.scale.pack(v)));
         self.sample_counts.clone_from(&w.samples);
+        self.buried_samples.clear();
+        self.buried_samples
+            .extend(w.burial.iter().map(|&b| b != Burial::Valid));
         let scale = self.scale;
         self.feet = crossings::settle_feet(&mut self.lines, &w.feet, |f| scale.pack(f));
         self.crossed_grids.clear();
         self.sample_lines.clear();
+        self.sample_probes.clear();
         for g in (0..slots).filter(|&g| w.crossed[g] && self.levels[g] > 0) {
             let (base, n) = (self.offsets[g] as usize, order_of_level(self.levels[g]));
             self.crossed_grids
                 .push([g as u32, self.sample_lines.len() as u32]);
             self.sample_lines
                 .extend_from_slice(&w.line_of[base..base + grid_size(n)]);
+            self.sample_probes.extend(
+                w.probe_of[base..base + grid_size(n)]
+                    .iter()
+                    .map(|&p| w.probes[p as usize]),
+            );
         }
     }
 }
@@ -232,6 +267,7 @@ impl Working {
         let mut std_error = vec![Vec3::ZERO; total];
         let mut burial = vec![Burial::Valid; total];
         let mut line_of = vec![NO_INDEX; total];
+        let mut probe_of = vec![NO_INDEX; total];
         let mut estimate_id = vec![NO_INDEX; total];
         for g in 0..slots {
             let (old, new) = (order_of_level(levels[g]), order_of_level(new_levels[g]));
@@ -246,6 +282,7 @@ impl Working {
                 std_error[to..to + s].copy_from_slice(&self.std_error[from..from + s]);
                 burial[to..to + s].copy_from_slice(&self.burial[from..from + s]);
                 line_of[to..to + s].copy_from_slice(&self.line_of[from..from + s]);
+                probe_of[to..to + s].copy_from_slice(&self.probe_of[from..from + s]);
                 estimate_id[to..to + s].copy_from_slice(&self.estimate_id[from..from + s]);
             } else {
                 for d in 0..=old {
@@ -256,6 +293,7 @@ impl Working {
                         samples[b] = self.samples[a];
                         std_error[b] = self.std_error[a];
                         line_of[b] = self.line_of[a];
+                        probe_of[b] = self.probe_of[a];
                         estimate_id[b] = self.estimate_id[a];
                         burial[b] = if self.burial[a] == Burial::Valid {
                             Burial::Valid
@@ -271,6 +309,7 @@ impl Working {
         self.std_error = std_error;
         self.burial = burial;
         self.line_of = line_of;
+        self.probe_of = probe_of;
         self.estimate_id = estimate_id;
     }
 
@@ -283,6 +322,7 @@ impl Working {
         levels: &[u8],
         new_levels: &[u8],
         offsets: &[u32],
+        points: &[SamplePoint],
         estimates: &[Estimate],
         threshold: f32,
     ) {
@@ -292,14 +332,19 @@ impl Working {
             let coarse = order_of_level(levels[g as usize]);
             let base = offsets[g as usize] as usize;
             for_each_new_sample(coarse, n, |_, _, m| {
-                let e = &estimates[self.sources[next] as usize];
+                let point = self.sources[next] as usize;
+                let e = &estimates[point];
+                // A re-bake's buried sample that the edit did not reach stays buried.
+                let kept_buried =
+                    e.samples == 0 && matches!(points[point].prior, Some(Prior::Filled(_)));
                 self.estimate_id[base + m] = self.estimates_seen + self.sources[next];
                 self.line_of[base + m] = self.round_lines[next];
+                self.probe_of[base + m] = self.round_probes[next];
                 next += 1;
                 self.raw[base + m] = e.value;
                 self.samples[base + m] = e.samples;
                 self.std_error[base + m] = e.std_error;
-                self.burial[base + m] = if e.back_face_share > threshold {
+                self.burial[base + m] = if e.back_face_share > threshold || kept_buried {
                     Burial::Buried
                 } else {
                     Burial::Valid
@@ -316,10 +361,13 @@ impl Working {
         self.pending_points = 0;
         self.sources.clear();
         self.round_lines.clear();
+        self.round_probes.clear();
         self.round_feet.clear();
         // Priors serve the first round only.
         self.priors = Vec::new();
         self.prior_offsets = Vec::new();
         self.prior_feet = Vec::new();
+        self.prior_probes = Vec::new();
+        self.prior_probe_offsets = Vec::new();
     }
 }

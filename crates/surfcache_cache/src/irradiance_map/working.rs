@@ -2,7 +2,7 @@
 //! current round asked for; dropped once the maps converge.
 
 use super::grid::{grid_size, order_of_level};
-use crate::{burial::Burial, crossings::SampleCrossing};
+use crate::{Prior, burial::Burial, crossings::SampleCrossing};
 use glam::Vec3;
 
 /// What only baking needs: raw estimates, their errors, burial flags, refinement state.
@@ -29,6 +29,12 @@ pub(super) struct Working {
     /// Per sample: its crossing line in [`IrradianceMaps::lines`], or
     /// [`NO_INDEX`] (module docs, Crossings).
     pub(super) line_of: Vec<u32>,
+    /// Per sample of a crossed grid: its probe in `probes`, or [`NO_INDEX`].
+    pub(super) probe_of: Vec<u32>,
+    /// The probes of crossed grids' samples, as made.
+    pub(super) probes: Vec<SampleProbe>,
+    /// Per new grid sample of the current round: its probe in `probes`, or [`NO_INDEX`].
+    pub(super) round_probes: Vec<u32>,
     /// Grid slots another surface crosses ([`crossed_grids`]): their samples are probed.
     pub(super) crossed: Vec<bool>,
     /// Per new grid sample of the current round, in the order of `sources`: its line.
@@ -67,13 +73,25 @@ pub(super) struct Working {
     /// Re-bakes: values of the maps before an edit, grid by grid, for the first round
     /// ([`SamplePoint::prior`]); `prior_offsets[g]` is grid slot g's first, or
     /// [`NO_INDEX`] for a grid without one.
-    pub(super) priors: Vec<Vec3>,
+    pub(super) priors: Vec<Prior>,
     pub(super) prior_offsets: Vec<u32>,
     /// Re-bakes: the feet before the edit, by prior index (ascending), with the line each
-    /// belonged to: a foot keeps its value as its prior where the edited scene gives its
-    /// sample the same line (module docs, Crossings).
+    /// belonged to (NaN: the foot was buried and its line settled without it): a foot
+    /// keeps its value as its prior where the edited scene gives its sample the same line
+    /// (module docs, Crossings).
     pub(super) prior_feet: Vec<(u32, SampleCrossing, Vec3)>,
+    /// Re-bakes: the probes before the edit of each crossed grid that no changed surface
+    /// comes near, grid by grid in [`grid_index`](super::grid_index) order;
+    /// `prior_probe_offsets[g]` is grid slot g's first, or [`NO_INDEX`] where its samples
+    /// are probed again.
+    pub(super) prior_probes: Vec<SampleProbe>,
+    pub(super) prior_probe_offsets: Vec<u32>,
 }
+
+/// What probing a crossed grid's sample gives ([`crossings::probe`](crate::crossings::probe)):
+/// the site it is estimated at, its crossing line, oriented from the site, and the
+/// barycentrics of the line's foot.
+pub(super) type SampleProbe = (glam::Vec2, Option<SampleCrossing>, Option<glam::Vec2>);
 
 /// A forecast of the grid samples of the rounds after the one handed out (progress
 /// reports, [`SurfaceCache::later_samples`]). Every grid of that round will double up to

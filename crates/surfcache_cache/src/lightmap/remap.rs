@@ -4,7 +4,7 @@
 use super::{BuiltInstance, Lightmaps, Probed, build_instance};
 use crate::{
     Prior, SurfaceCache, UNMAPPED, crossings,
-    incremental::{ChangePatch, Side},
+    incremental::{ChangePatch, changed_region},
     stored_rgb::difference_beyond,
 };
 use glam::{Vec2, Vec3};
@@ -275,21 +275,7 @@ impl Lightmaps {
                         } else {
                             before.lookup(t_old, uv, front)
                         };
-                        // A texel passes on its whole change once it is beyond `share`.
-                        let change = if !(after - old).is_finite() {
-                            f32::INFINITY
-                        } else if difference_beyond(after, old, share).max_element() > 0.0 {
-                            (after - old).abs().max_element()
-                        } else {
-                            0.0
-                        };
-                        (change > 0.0).then(|| ChangePatch {
-                            triangle: t,
-                            side: if front { Side::Front } else { Side::Back },
-                            uv: Some(uv),
-                            area: texel_area(t),
-                            change,
-                        })
+                        ChangePatch::of_sample(t, front, uv, texel_area(t), after, old, share)
                     })
                 })
             })
@@ -297,71 +283,22 @@ impl Lightmaps {
     }
 }
 
-/// A box (min, max) around every triangle that an edit moved, added or removed: those of
-/// `new` without a counterpart in `old` (`triangle_map`) or with other corners, and those
-/// of `old` that no triangle of `new` maps to. `None` when none did.
-fn changed_region(
-    old: &TracedScene,
-    new: &TracedScene,
-    triangle_map: &[u32],
-) -> Option<(Vec3, Vec3)> {
-    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    let mut add = |corners: [Vec3; 3]| {
-        for p in corners {
-            (lo, hi) = (lo.min(p), hi.max(p));
-        }
-    };
-    let mut kept = vec![false; old.triangle_count()];
-    for (t, &corners) in new.positions().iter().enumerate() {
-        let t_old = triangle_map.get(t).copied().unwrap_or(UNMAPPED);
-        match old.positions().get(t_old as usize) {
-            Some(&before) => {
-                kept[t_old as usize] = true;
-                if before != corners {
-                    add(before);
-                    add(corners);
-                }
-            }
-            None => add(corners),
-        }
-    }
-    for (t_old, &corners) in old.positions().iter().enumerate() {
-        if !kept[t_old] {
-            add(corners);
-        }
-    }
-    (lo.x <= hi.x).then_some((lo, hi))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::LightmapSettings;
-    use surfcache_core::{glam::Affine3A, scenes::cornell};
+    use crate::{LightmapSettings, incremental::cornell_moved};
 
     /// A re-bake carries the probes of the texels an edit did not come near, and probes
     /// the others again: together they must be exactly the probes of the edited scene.
     #[test]
     fn carried_probes_are_the_probes_of_the_edited_scene() {
-        let old_scene = cornell();
-        let mut new_scene = old_scene.clone();
-        for i in &mut new_scene.instances {
-            if i.name == "short_block" {
-                i.transform = Affine3A::from_translation(Vec3::new(0.1, 0.0, 0.0)) * i.transform;
-            }
-        }
-        let old = TracedScene::new(&old_scene).unwrap();
-        let new = TracedScene::new(&new_scene).unwrap();
+        let (old, new, map) = cornell_moved(|name| name == "short_block", Vec3::X * 0.1);
         let settings = LightmapSettings {
             texels_per_metre: 16.0,
             ..Default::default()
         };
         let mut before = Lightmaps::new(&old, settings);
         before.probe_crossings(&old);
-        let identity: Vec<Option<u32>> = (0..new.instance_triangles().len() as u32)
-            .map(Some)
-            .collect();
-        let map = crate::triangle_map(&old, &new, &identity);
         let mut carried = before.remapped(&old, &new, &map);
         let mut fresh = carried.clone();
         fresh.probed = None;
