@@ -506,8 +506,10 @@ impl SurfaceCache for IrradianceMaps {
     /// Every grid of a surviving triangle starts at its order before the edit, all its
     /// samples asked for again with their values as priors (buried ones as
     /// [`Prior::Filled`]: they stay buried where the edit does not reach them, and are
-    /// estimated afresh where it does); grids of new triangles start afresh at order `min(2, n_max)`. Refinement then continues
-    /// as in a full bake, so a grid the edit gave new detail (a shadow edge) doubles.
+    /// estimated afresh where it does); grids of new triangles start afresh at order
+    /// `min(2, n_max)`. Refinement then continues as in a full bake, so a grid the edit
+    /// gave new detail (a shadow edge) doubles. Grids that no changed surface comes near
+    /// keep their crossed flags and their samples' probes.
     fn remap(&self, old: &TracedScene, new: &TracedScene, triangle_map: &[u32]) -> Self {
         // A grid's crossings lie within its probes' reach (at most `LINE_REACH` times its
         // longest edge): a kept triangle that no changed surface comes that near keeps them.
