@@ -162,6 +162,23 @@ impl SampleCrossing {
         self.distance(at) >= 0.0
     }
 
+    /// A re-bake's prior for the foot of this line, given the line `old` the sample had
+    /// before the edit and the foot's value then (NaN: it was buried and `old` settled
+    /// without it, [`settle_feet`]): the value where the line is the same, a buried foot
+    /// ([`Prior::Filled`], stays buried unless the stage estimates it) where the settled
+    /// line is, `None` otherwise.
+    pub fn foot_prior(&self, old: &SampleCrossing, value: Vec3) -> Option<crate::Prior> {
+        if value.is_nan() {
+            let settled = SampleCrossing {
+                foot: self.site,
+                ..*self
+            };
+            (settled == *old).then_some(crate::Prior::Filled(Vec3::ZERO))
+        } else {
+            (self == old).then_some(crate::Prior::Estimated(value))
+        }
+    }
+
     /// Whether the sample has a foot (`foot < site`; otherwise it keeps its own value
     /// up to the line).
     #[inline]

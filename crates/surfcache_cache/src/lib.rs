@@ -119,6 +119,14 @@ pub enum Prior {
     Filled(Vec3),
 }
 
+impl Prior {
+    /// Whether a sample with `prior` whose estimate is `e` stays buried: a filled prior
+    /// the re-bake kept without drawing a sample (the edit did not reach it).
+    pub fn kept_buried(prior: Option<Prior>, e: &Estimate) -> bool {
+        e.samples == 0 && matches!(prior, Some(Prior::Filled(_)))
+    }
+}
+
 /// A sample a cache needs, with the key of its random stream.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SamplePoint {

@@ -442,9 +442,7 @@ impl SurfaceCache for IrradianceMaps {
         for &(line, point) in &w.round_feet {
             let e = &estimates[point as usize];
             // A re-bake's buried foot that the edit did not reach stays buried.
-            let kept_buried =
-                e.samples == 0 && matches!(points[point as usize].prior, Some(Prior::Filled(_)));
-            w.feet[line as usize] = match kept_buried {
+            w.feet[line as usize] = match Prior::kept_buried(points[point as usize].prior, e) {
                 true => Vec3::NAN,
                 false => crossings::foot_value(e),
             };

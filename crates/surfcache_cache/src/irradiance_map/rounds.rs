@@ -133,16 +133,7 @@ impl IrradianceMaps {
                             let k = (b + m) as u32;
                             let i = w.prior_feet.binary_search_by_key(&k, |f| f.0).ok()?;
                             let (_, old_line, value) = w.prior_feet[i];
-                            let line = crossing?;
-                            if value.is_nan() {
-                                let settled = SampleCrossing {
-                                    foot: line.site,
-                                    ..line
-                                };
-                                (settled == old_line).then_some(Prior::Filled(Vec3::ZERO))
-                            } else {
-                                (old_line == line).then_some(Prior::Estimated(value))
-                            }
+                            crossing?.foot_prior(&old_line, value)
                         });
                         w.round_feet.push((line, (points.len() - start) as u32));
                         points.push(SamplePoint {
@@ -335,8 +326,7 @@ impl Working {
                 let point = self.sources[next] as usize;
                 let e = &estimates[point];
                 // A re-bake's buried sample that the edit did not reach stays buried.
-                let kept_buried =
-                    e.samples == 0 && matches!(points[point].prior, Some(Prior::Filled(_)));
+                let kept_buried = Prior::kept_buried(points[point].prior, e);
                 self.estimate_id[base + m] = self.estimates_seen + self.sources[next];
                 self.line_of[base + m] = self.round_lines[next];
                 self.probe_of[base + m] = self.round_probes[next];

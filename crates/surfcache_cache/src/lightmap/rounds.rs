@@ -150,17 +150,7 @@ impl Lightmaps {
             let prior = self
                 .prior_feet
                 .get(&(slot as u32))
-                .and_then(|&(old, foot)| {
-                    if foot.is_nan() {
-                        let settled = crossings::SampleCrossing {
-                            foot: line.site,
-                            ..line
-                        };
-                        (settled == old).then_some(Prior::Filled(Vec3::ZERO))
-                    } else {
-                        (line == old).then_some(Prior::Estimated(foot))
-                    }
-                });
+                .and_then(|(old, foot)| line.foot_prior(old, *foot));
             points.push(SamplePoint {
                 site: SampleSite::Surface {
                     triangle: self.owner[i],
@@ -228,8 +218,7 @@ impl Lightmaps {
             self.merged[slot].merge(e);
             if matches!(self.state[slot], Burial::Empty | Burial::Moved) {
                 // A re-bake's buried texel that the edit did not reach stays buried.
-                let kept_buried =
-                    e.samples == 0 && matches!(self.priors.get(slot), Some(Some(Prior::Filled(_))));
+                let kept_buried = Prior::kept_buried(self.priors.get(slot).copied().flatten(), e);
                 let buried = e.back_face_share > self.settings.buried_threshold || kept_buried;
                 let exit = self
                     .probed
