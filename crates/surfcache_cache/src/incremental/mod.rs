@@ -520,6 +520,13 @@ pub fn changed_region(
     (lo.x <= hi.x).then_some((lo, hi))
 }
 
+/// Whether the box `lo..=hi` comes within `reach` (per axis) of `region`, the box of
+/// [`changed_region`] (`None`: nothing changed). A re-bake carries crossing probes only
+/// where it does not.
+pub fn near_changed_region(region: Option<(Vec3, Vec3)>, lo: Vec3, hi: Vec3, reach: Vec3) -> bool {
+    region.is_some_and(|(r_lo, r_hi)| lo.cmple(r_hi + reach).all() && hi.cmpge(r_lo - reach).all())
+}
+
 /// A bound on the change an indirect stage integrates, `ΔL(y) = ρ(y)/π · ΔE(y)` at first
 /// hits y: the changed triangles binned into a uniform grid of [`CHANGE_CELLS`]³ cells
 /// over their bounds, each cell with a bounding sphere and the largest ΔL of its

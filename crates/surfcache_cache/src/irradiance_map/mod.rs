@@ -181,7 +181,7 @@ use crate::burial::Burial;
 use crate::{
     CacheStats, Diagnostic, IrradianceTexture, Method, Prior, SamplePoint, SurfaceCache, UNMAPPED,
     crossings,
-    incremental::{ChangePatch, changed_region},
+    incremental::{ChangePatch, changed_region, near_changed_region},
     mesh_colour,
     stored_rgb::{STORED_RGB_BYTES, StoreScale, StoredRgb},
 };
@@ -522,15 +522,12 @@ impl SurfaceCache for IrradianceMaps {
             {
                 return None;
             }
-            if let Some((lo, hi)) = region {
-                let [a, b, c] = corners;
-                let reach = Vec3::splat(
-                    crossings::LINE_REACH * longest_edge(a, b, c) + 4.0 * new.spawn_offset(),
-                );
-                let (t_lo, t_hi) = (a.min(b).min(c) - reach, a.max(b).max(c) + reach);
-                if t_lo.cmple(hi).all() && t_hi.cmpge(lo).all() {
-                    return None;
-                }
+            let [a, b, c] = corners;
+            let reach = Vec3::splat(
+                crossings::LINE_REACH * longest_edge(a, b, c) + 4.0 * new.spawn_offset(),
+            );
+            if near_changed_region(region, a.min(b).min(c), a.max(b).max(c), reach) {
+                return None;
             }
             Some(self.is_crossed(t_old, front))
         };

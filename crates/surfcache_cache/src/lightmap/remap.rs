@@ -4,7 +4,7 @@
 use super::{BuiltInstance, Lightmaps, Probed, build_instance};
 use crate::{
     Prior, SurfaceCache, UNMAPPED, crossings,
-    incremental::{ChangePatch, changed_region},
+    incremental::{ChangePatch, changed_region, near_changed_region},
     stored_rgb::difference_beyond,
 };
 use glam::{Vec2, Vec3};
@@ -207,9 +207,7 @@ impl Lightmaps {
                 }
                 let [a, b, c] = new.positions()[t as usize];
                 let x = interpolate(a, b, c, fresh.sample_uv[m.offset + k]);
-                if region
-                    .is_some_and(|(lo, hi)| x.cmpge(lo - reach).all() && x.cmple(hi + reach).all())
-                {
+                if near_changed_region(region, x, x, reach) {
                     continue;
                 }
                 for layer in 0..fresh.layers {
