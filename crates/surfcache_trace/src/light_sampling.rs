@@ -91,6 +91,11 @@ impl LightSampler {
         self.emitters.is_empty() && self.environment.is_none()
     }
 
+    /// The importance sampler of the environment map (`None`: no map, or a black one).
+    pub fn environment(&self) -> Option<&EnvironmentSampler> {
+        self.environment.as_ref()
+    }
+
     /// Number of emissive triangles.
     pub fn emitter_count(&self) -> usize {
         self.emitters.len()

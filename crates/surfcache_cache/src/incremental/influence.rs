@@ -52,15 +52,14 @@
 use crate::stored_rgb::difference_beyond;
 use glam::{IVec3, Vec2, Vec3};
 use rayon::prelude::*;
+use rustc_hash::FxHashMap;
 use std::{
-    collections::HashMap,
     f32::consts::PI,
     ops::Range,
     sync::atomic::{AtomicU64, Ordering::Relaxed},
 };
 use surfcache_core::Light;
 use surfcache_core::{
-    EnvironmentSampler,
     color::luminance,
     geometry::{to_world, triangle_area},
     sampling::{Distribution1D, Rng, cosine_hemisphere, splitmix64, uniform_triangle},
@@ -91,7 +90,10 @@ const SHADOW_SHARE: f32 = 0.25;
 pub struct Influence {
     radius: f32,
     /// Hits sorted by grid cell (cell size R); each cell's range of them.
-    cells: HashMap<IVec3, Range<u32>>,
+    cells: FxHashMap<IVec3, Range<u32>>,
+    /// The cells within one cell of a cell with hits: most points of a level have no
+    /// hit within R, and one test tells them so ([`Self::change_at`]).
+    near_hits: CellFilter,
     position: Vec<Vec3>,
     normal: Vec<Vec3>,
     /// `w` of each hit, per channel and signed; infinite for a bright light's shadow.
@@ -460,7 +462,7 @@ impl Influence {
             (c.x, c.y, c.z, h.certain())
         });
         let mut kept: Vec<ForwardHit> = Vec::with_capacity(hits.len());
-        let mut cells = HashMap::new();
+        let mut cells = FxHashMap::default();
         let mut start = 0;
         for i in 1..=hits.len() {
             let group_ends = i == hits.len()
@@ -484,9 +486,20 @@ impl Influence {
             range.end = kept.len() as u32;
             start = i;
         }
+        let mut near_hits = CellFilter::with_capacity(27 * cells.len());
+        for c in cells.keys() {
+            for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        near_hits.insert(*c + IVec3::new(dx, dy, dz));
+                    }
+                }
+            }
+        }
         Self {
             radius,
             cells,
+            near_hits,
             position: kept.iter().map(|h| h.position).collect(),
             normal: kept.iter().map(|h| h.normal).collect(),
             weight: kept.iter().map(|h| h.weight).collect(),
@@ -556,6 +569,9 @@ impl Influence {
     pub fn change_at(&self, x: Vec3, n: Vec3) -> (f32, f32) {
         let r2 = self.radius * self.radius;
         let centre = (x / self.radius).floor().as_ivec3();
+        if !self.near_hits.may_contain(centre) {
+            return (0.0, 0.0);
+        }
         let (mut sum, mut squares) = (Vec3::ZERO, Vec3::ZERO);
         for dz in -1..=1 {
             for dy in -1..=1 {
@@ -592,6 +608,40 @@ impl Influence {
     }
 }
 
+/// A set of grid cells that may answer "yes" for a cell it does not hold, never "no" for
+/// one it does (a Bloom filter with one hash): a bit per hashed cell, about eight bits
+/// per cell inserted.
+struct CellFilter {
+    bits: Vec<u64>,
+    mask: u64,
+}
+
+impl CellFilter {
+    fn with_capacity(cells: usize) -> Self {
+        let bits = (8 * cells).next_power_of_two().max(64);
+        Self {
+            bits: vec![0; bits / 64],
+            mask: bits as u64 - 1,
+        }
+    }
+
+    fn bit(&self, cell: IVec3) -> u64 {
+        let key =
+            cell.x as u32 as u64 ^ (cell.y as u32 as u64) << 21 ^ (cell.z as u32 as u64) << 42;
+        splitmix64(key) & self.mask
+    }
+
+    fn insert(&mut self, cell: IVec3) {
+        let b = self.bit(cell);
+        self.bits[(b / 64) as usize] |= 1 << (b % 64);
+    }
+
+    fn may_contain(&self, cell: IVec3) -> bool {
+        let b = self.bit(cell);
+        self.bits[(b / 64) as usize] & (1 << (b % 64)) != 0
+    }
+}
+
 /// The direction towards a bright light from a source point, or `None` (a sky sample too
 /// dim to count).
 type TowardsLight<'a> = Box<dyn Fn(Vec3, &mut Rng) -> Option<Vec3> + Sync + 'a>;
@@ -602,9 +652,8 @@ fn shadow_hits(sources: &Sources, n: u32, stream: u64) -> (Vec<ForwardHit>, u64)
     let scene = sources.scene;
     let mut lights: Vec<TowardsLight> = Vec::new();
     if let Some(map) = &scene.environment().map
-        && !scene.environment().is_black()
+        && let Some(sampler) = scene.light_sampler().environment()
     {
-        let sampler = EnvironmentSampler::new(map);
         let cut = BRIGHT_FACTOR * sampler.mean_luminance();
         if map.texels.iter().any(|&t| luminance(t) > cut) {
             lights.push(Box::new(move |_, rng| {

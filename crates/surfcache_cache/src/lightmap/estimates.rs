@@ -71,7 +71,11 @@ impl Lightmaps {
     /// The merged estimates, filtered texture by texture when `plan` filters (else as
     /// they are): value and variance per slot.
     pub(super) fn filtered(&self, plan: Option<&SamplingPlan>) -> Vec<(Vec3, Vec3)> {
-        let mut out: Vec<(Vec3, Vec3)> = self.merged.iter().map(|e| (e.mean, e.variance)).collect();
+        let mut out: Vec<(Vec3, Vec3)> = self
+            .merged
+            .par_iter()
+            .map(|e| (e.mean, e.variance))
+            .collect();
         let Some(plan) = plan.filter(|p| p.filter.iterations > 0) else {
             return out;
         };
@@ -144,14 +148,14 @@ impl Lightmaps {
     /// ([`crate::stored_rgb`]), and the crossings' feet with it.
     fn pack(&mut self, values: &[Vec3]) {
         let max = values
-            .iter()
+            .par_iter()
             .map(|v| v.max_element())
-            .fold(0.0f32, f32::max);
+            .reduce(|| 0.0f32, f32::max);
         self.scale = StoreScale::for_max(max);
-        self.packed = values.iter().map(|&v| self.scale.pack(v)).collect();
+        let scale = self.scale;
+        self.packed = values.par_iter().map(|&v| scale.pack(v)).collect();
         // Feet share the texels' scale (clamped to their largest value, so that the
         // texels are stored as without them).
-        let scale = self.scale;
         self.crossing_feet = crossings::settle_feet(&mut self.crossing_lines, &self.feet, |f| {
             scale.pack(f.min(Vec3::splat(max)))
         });

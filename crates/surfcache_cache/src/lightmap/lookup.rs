@@ -36,18 +36,20 @@ impl Lightmaps {
         // A re-bake carries the probes of slots that no changed surface came near
         // ([`Probed::stale`]).
         let carried = self.probed.take().filter(|p| p.site_uv.len() == total);
-        // Per slot: a fresh probe (site, probe), or the probes it is carried from.
-        let probes: Vec<Result<(Vec2, Probe), &Probed>> = (0..total)
-            .into_par_iter()
-            .map(|slot| {
-                if let Some(p) = carried.as_deref()
-                    && !p.stale.get(slot).copied().unwrap_or(false)
-                {
-                    return Err(p);
-                }
+        // The slots probed afresh (all but those a re-bake carries), and their probes.
+        let fresh: Vec<usize> = (0..total)
+            .filter(|&slot| {
+                carried
+                    .as_deref()
+                    .is_none_or(|p| p.stale.get(slot).copied().unwrap_or(false))
+            })
+            .collect();
+        let probes: Vec<(Vec2, Probe)> = fresh
+            .par_iter()
+            .map(|&slot| {
                 let (layer, i) = (slot / self.layer_texels, slot % self.layer_texels);
                 let uv = self.sample_uv[i];
-                Ok(match self.owner[i] {
+                match self.owner[i] {
                     NO_INDEX => (uv, Probe::default()),
                     t => {
                         let m = &self.maps[self.triangle_instance[t as usize] as usize];
@@ -72,7 +74,7 @@ impl Lightmaps {
                         }
                         (site, probe)
                     }
-                })
+                }
             })
             .collect();
         let mut found = Probed {
@@ -81,9 +83,10 @@ impl Lightmaps {
             crossing_slot: vec![NO_INDEX; total],
             ..Default::default()
         };
-        for (slot, probe) in probes.into_iter().enumerate() {
-            let crossing = match probe {
-                Ok((uv, probe)) => {
+        let mut fresh = fresh.iter().zip(probes).peekable();
+        for slot in 0..total {
+            let crossing = match fresh.next_if(|(s, _)| **s == slot) {
+                Some((_, (uv, probe))) => {
                     found.site_uv.push(uv);
                     found.exits.push(probe.exit);
                     probe.crossing.and_then(|line| {
@@ -93,7 +96,10 @@ impl Lightmaps {
                         crossings::SampleCrossing::new(scene, t, front, &line, corners, uv)
                     })
                 }
-                Err(p) => {
+                None => {
+                    let p = carried
+                        .as_deref()
+                        .expect("a slot not probed afresh is carried");
                     found.site_uv.push(p.site_uv[slot]);
                     found.exits.push(p.exits[slot]);
                     let c = p.crossing_slot[slot];

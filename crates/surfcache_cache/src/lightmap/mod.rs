@@ -255,6 +255,13 @@ impl Lightmaps {
         Self::from_instances(scene, settings, built)
     }
 
+    /// The plan that filters each round's estimates and refines where they are above
+    /// the bound: none in an incremental re-bake (priors), whose estimates update
+    /// filtered values and are stopped by the estimator itself.
+    fn refining_plan(&self) -> Option<SamplingPlan> {
+        self.plan.filter(|_| self.priors.is_empty())
+    }
+
     /// The settings the maps were laid out with.
     pub fn settings(&self) -> &LightmapSettings {
         &self.settings
@@ -356,7 +363,7 @@ impl SurfaceCache for Lightmaps {
         debug_assert_eq!(points.len(), self.slots.len() + self.foot_lines.len());
         self.record_feet(estimates);
         let moved = self.merge_round(scene, estimates);
-        let plan = self.plan.filter(|_| self.priors.is_empty());
+        let plan = self.refining_plan();
         let filtered = self.filtered(plan.as_ref());
         self.plan_next_round(plan, &moved, &filtered);
         self.guides

@@ -122,6 +122,7 @@ impl Lightmaps {
         share: f32,
     ) -> Vec<f32> {
         (0..self.triangle_instance.len())
+            .into_par_iter()
             .map(|t| {
                 let t_old = triangle_map.get(t).copied().unwrap_or(UNMAPPED);
                 let same_layout = self.kept_layout(before, t, t_old);

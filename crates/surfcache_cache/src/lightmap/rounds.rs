@@ -97,18 +97,20 @@ impl Lightmaps {
     /// the plan's first budget (none in an incremental re-bake), then the feet of crossed
     /// texels.
     pub(super) fn first_round(&mut self, scene: &TracedScene, points: &mut Vec<SamplePoint>) {
-        // An incremental re-bake (priors) keeps one round of estimates stopped by the
-        // estimator itself: they update filtered values, which are not filtered again.
-        let budget = match self.plan {
-            Some(plan) if self.priors.is_empty() => Some(plan.first),
-            _ => None,
-        };
-        if let Some(plan) = self.plan.filter(|p| {
-            self.settings.guiding && self.priors.is_empty() && p.bound > 0.0 && p.max > p.first
-        }) {
+        // An incremental re-bake (no refining plan) keeps one round of estimates stopped
+        // by the estimator itself: they update filtered values, which are not filtered
+        // again.
+        let budget = self.refining_plan().map(|plan| plan.first);
+        if let Some(plan) = self
+            .refining_plan()
+            .filter(|p| self.settings.guiding && p.bound > 0.0 && p.max > p.first)
+        {
             self.guides = TexelGuides::recording(&self.maps, &self.owner, self.layers, plan.floor);
         }
         self.probe_crossings(scene);
+        let texels = self.layers * self.owned_texels();
+        points.reserve(texels + self.crossing_lines.len());
+        self.slots.reserve(texels);
         for layer in 0..self.layers {
             for m in &self.maps {
                 for i in m.offset..m.offset + m.texels() {
@@ -210,7 +212,10 @@ impl Lightmaps {
         if self.merged.len() != total {
             self.merged = vec![TexelEstimate::default(); total];
             self.state = vec![Burial::Empty; total];
-            self.guide = self.texel_guides(scene);
+            // Guides serve the filter alone.
+            if self.refining_plan().is_some() {
+                self.guide = self.texel_guides(scene);
+            }
         }
         let mut moved = Vec::new();
         for (&slot, e) in self.slots.iter().zip(estimates) {
@@ -228,9 +233,7 @@ impl Lightmaps {
                     (false, _, _) => Burial::Valid,
                     // Inside a solid, with a visible part of the footprint beyond the
                     // crossing: estimate there instead.
-                    (true, Some(uv), Burial::Empty)
-                        if self.plan.is_some() && self.priors.is_empty() =>
-                    {
+                    (true, Some(uv), Burial::Empty) if self.refining_plan().is_some() => {
                         self.site_uv[slot] = uv;
                         self.merged[slot] = TexelEstimate::default();
                         moved.push(slot as u32);
