@@ -58,6 +58,27 @@ fn neighbours(k: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
         .map(move |(i, j)| j as usize * w + i as usize)
 }
 
+/// The mean of texel `k`'s valid 8-neighbours (of its own chart unless `any_chart`), if
+/// it has any.
+fn valid_mean(
+    k: usize,
+    values: &[Vec3],
+    state: &[Burial],
+    chart: &[u32],
+    any_chart: bool,
+    w: usize,
+    h: usize,
+) -> Option<Vec3> {
+    let (mut sum, mut count) = (Vec3::ZERO, 0u32);
+    for j in neighbours(k, w, h) {
+        if state[j] == Burial::Valid && (any_chart || chart[j] == chart[k]) {
+            sum += values[j];
+            count += 1;
+        }
+    }
+    (count > 0).then(|| sum / count as f32)
+}
+
 /// Refills buried texels of one texture from valid 8-neighbours by iterative averaging
 /// (a Jacobi-style flood fill: each pass sets every buried texel that touches a valid one
 /// to the mean of those, which then count as valid), preferring neighbours of the same
@@ -79,18 +100,11 @@ fn fill_buried(values: &mut [Vec3], state: &mut [Burial], chart: &[u32], w: usiz
     loop {
         pass += 1;
         updates.clear();
-        for &k in &candidates {
-            let (mut sum, mut count) = (Vec3::ZERO, 0u32);
-            for j in neighbours(k, w, h) {
-                if state[j] == Burial::Valid && (any_chart || chart[j] == chart[k]) {
-                    sum += values[j];
-                    count += 1;
-                }
-            }
-            if count > 0 {
-                updates.push((k, sum / count as f32));
-            }
-        }
+        updates.extend(
+            candidates.iter().filter_map(|&k| {
+                valid_mean(k, values, state, chart, any_chart, w, h).map(|v| (k, v))
+            }),
+        );
         if updates.is_empty() {
             if any_chart {
                 break;
@@ -174,15 +188,8 @@ mod tests {
         while !pending.is_empty() {
             let mut updates = Vec::new();
             for &k in &pending {
-                let (mut sum, mut count) = (Vec3::ZERO, 0u32);
-                for j in neighbours(k, w, h) {
-                    if state[j] == Burial::Valid && (any_chart || chart[j] == chart[k]) {
-                        sum += values[j];
-                        count += 1;
-                    }
-                }
-                if count > 0 {
-                    updates.push((k, sum / count as f32));
+                if let Some(v) = valid_mean(k, values, state, chart, any_chart, w, h) {
+                    updates.push((k, v));
                 }
             }
             if updates.is_empty() {
