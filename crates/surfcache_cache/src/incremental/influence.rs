@@ -733,3 +733,27 @@ fn forward_ray(
         weight,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The filter never says "no" for a cell it holds (whatever the coordinates' signs
+    /// and sizes), and says "no" for most cells it does not.
+    #[test]
+    fn cell_filter_holds_every_cell_inserted() {
+        let mut rng = Rng::new(7, 0);
+        let mut cell = || {
+            let u = rng.next_vec2().extend(rng.next_f32());
+            ((u - 0.5) * 2.0e5).floor().as_ivec3()
+        };
+        let inserted: Vec<IVec3> = (0..5_000).map(|_| cell()).collect();
+        let mut filter = CellFilter::with_capacity(inserted.len());
+        for &c in &inserted {
+            filter.insert(c);
+        }
+        assert!(inserted.iter().all(|&c| filter.may_contain(c)));
+        let others = (0..10_000).filter(|_| filter.may_contain(cell())).count();
+        assert!(others < 2_000, "{others} of 10,000 other cells pass");
+    }
+}
