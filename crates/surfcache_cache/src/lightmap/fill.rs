@@ -89,9 +89,12 @@ fn valid_mean(
 /// other can have gained a valid neighbour), so the fill costs the texels it fills, not
 /// their number times the passes.
 fn fill_buried(values: &mut [Vec3], state: &mut [Burial], chart: &[u32], w: usize, h: usize) {
-    let mut candidates: Vec<usize> = (0..values.len())
-        .filter(|&k| state[k] == Burial::Buried)
-        .collect();
+    let still_buried = |state: &[Burial]| {
+        (0..state.len())
+            .filter(|&k| state[k] == Burial::Buried)
+            .collect::<Vec<usize>>()
+    };
+    let mut candidates = still_buried(state);
     // The pass in which a texel last became a candidate (none yet: 0).
     let mut queued = vec![0u32; values.len()];
     let mut updates: Vec<(usize, Vec3)> = Vec::new();
@@ -112,8 +115,7 @@ fn fill_buried(values: &mut [Vec3], state: &mut [Burial], chart: &[u32], w: usiz
             // No buried texel has a valid neighbour of its own chart: one pass takes
             // any valid neighbour, looking at every texel still buried.
             any_chart = true;
-            candidates.clear();
-            candidates.extend((0..values.len()).filter(|&k| state[k] == Burial::Buried));
+            candidates = still_buried(state);
             if candidates.is_empty() {
                 break;
             }
