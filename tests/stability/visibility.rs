@@ -8,7 +8,7 @@ use surfcache::cache::{
     Cache, CacheSettings, IrradianceMapSettings, LightmapSettings, SurfaceCache,
 };
 use surfcache::core::glam::Vec3;
-use surfcache::core::scenes::{append, cuboid, quad};
+use surfcache::core::scenes::{append, cuboid, quad, square};
 use surfcache::core::{Environment, Instance, Light, Mesh};
 use surfcache::trace::{Estimate, EstimatorSettings, PointInScene, Sampler, estimate};
 
@@ -512,4 +512,62 @@ fn dark_niche_black_blotches_and_how_gathering_removes_them() {
         assert_eq!(e.back_face_share, if inward { 0.0 } else { 1.0 });
         assert!(e.rel_error <= rel);
     }
+}
+
+/// **Partly buried points stop early.** A floor point inside an open-topped box of
+/// outward-facing walls sends most first rays into the walls' backs: a cache discards it
+/// as buried (back-face share above its threshold, ½) and fills it from its neighbours,
+/// so samples beyond the verdict are wasted. With the cache's threshold given
+/// ([`PointInScene::with_buried_share`]) the estimate stops once the back-face count
+/// exceeds the threshold by three binomial standard deviations. Asserted: inside a tall
+/// box (share ≈ 0.9) and a box as high as wide (≈ 0.8) it stops well before the cap
+/// and still says buried, as the full estimate does; inside a shallow box (≈ 0.2), kept
+/// by the cache, the estimate is the full one bit for bit; a threshold of 1 (detection
+/// off) changes nothing.
+#[test]
+fn partly_buried_points_stop_at_their_verdict() {
+    let v = Vec3::new;
+    let open_box = |name: &str, x: f32, height: f32| {
+        let mut mesh = cuboid(name, v(x - 0.5, -0.5, -0.5), v(x + 0.5, height, 0.5), false);
+        let positions = mesh.positions.clone();
+        mesh.indices
+            .retain(|t| t.iter().any(|&i| positions[i as usize].y < height));
+        mesh
+    };
+    let mut floor = square("floor", 6.0, 0.0, Vec3::Y);
+    append(&mut floor, &open_box("tall", 0.0, 1.5));
+    append(&mut floor, &open_box("cube", 2.0, 1.0));
+    append(&mut floor, &open_box("shallow", 4.0, 0.25));
+    let scene = traced_with_lights(
+        vec![Instance::new(floor, grey(0.5))],
+        Environment::uniform(Vec3::splat(1.0)),
+        Vec::new(),
+    );
+    let max_samples = 1024;
+    // Bound 0: without the stop every estimate draws max_samples.
+    let settings = estimator_with(0.0, 16, max_samples, 0.01);
+    let at = |x: f32, share: Option<f32>| {
+        let p = scene.locate(v(x, 0.0, 0.1), Vec3::Y).unwrap();
+        let at = PointInScene::new(&scene, p, scene.spawn_origin(&p)).with_buried_share(share);
+        estimate(&at, &settings, 3, 11)
+    };
+    for (x, what) in [(0.0, "tall box"), (2.0, "cube")] {
+        let (full, early) = (at(x, None), at(x, Some(0.5)));
+        eprintln!(
+            "{what}: back-face share {:.3} after {} samples, {:.3} after {}",
+            full.back_face_share, full.samples, early.back_face_share, early.samples
+        );
+        assert_eq!(full.samples, max_samples, "{what}");
+        assert!(
+            full.back_face_share > 0.5,
+            "{what}: the setup no longer buries"
+        );
+        assert!(early.back_face_share > 0.5, "{what}: the verdict changed");
+        assert!(early.samples <= 64, "{what}: {} samples", early.samples);
+        assert_eq!(at(x, Some(1.0)), full, "{what}: detection off");
+    }
+    let (full, early) = (at(4.0, None), at(4.0, Some(0.5)));
+    eprintln!("shallow box: back-face share {:.3}", full.back_face_share);
+    assert!(full.back_face_share > 0.05 && full.back_face_share < 0.5);
+    assert_eq!(early, full, "a kept point's estimate changed");
 }

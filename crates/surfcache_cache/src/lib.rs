@@ -192,6 +192,14 @@ pub trait SurfaceCache: Send + Sync {
         Guidance::default()
     }
 
+    /// The back-face share above which the cache will discard point `i` of the round
+    /// [`Self::next_round`] last produced as buried, if it discards any: its estimate may
+    /// stop as soon as that is sure ([`PointInScene::with_buried_share`]). The default:
+    /// none, every estimate runs to its own stopping rule.
+    fn buried_share(&self, _i: usize) -> Option<f32> {
+        None
+    }
+
     /// Takes the estimates of the points the last [`Self::next_round`] produced, in the
     /// same order.
     fn finish_round(&mut self, scene: &TracedScene, points: &[SamplePoint], estimates: &[Estimate]);
@@ -494,6 +502,10 @@ impl SurfaceCache for Cache {
 
     fn guidance(&self, i: usize) -> Guidance<'_> {
         self.inner().guidance(i)
+    }
+
+    fn buried_share(&self, i: usize) -> Option<f32> {
+        self.inner().buried_share(i)
     }
 
     fn finish_round(

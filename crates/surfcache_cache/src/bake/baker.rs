@@ -156,7 +156,9 @@ impl<C: SurfaceCache> Baker<C> {
                 previous
                     .and_then(|prev| prev.update(scene, p, settings, seed, gather))
                     .unwrap_or_else(|| {
-                        estimate_point(scene, p, settings, seed, gather, cache.guidance(start + j))
+                        let i = start + j;
+                        let (guidance, buried) = (cache.guidance(i), cache.buried_share(i));
+                        estimate_point(scene, p, settings, seed, gather, guidance, buried)
                     })
             })
             .collect()

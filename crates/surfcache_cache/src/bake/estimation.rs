@@ -191,7 +191,8 @@ impl Previous {
 }
 
 /// Estimates E at one sample point of a cache (with final gathering from `gather` when
-/// given: see [`IrradianceLookup`]), guided as the cache says.
+/// given: see [`IrradianceLookup`]), guided as the cache says, stopping early where the
+/// cache will discard it as buried above `buried_share` ([`crate::SurfaceCache::buried_share`]).
 pub fn estimate_point(
     scene: &TracedScene,
     point: &SamplePoint,
@@ -199,11 +200,13 @@ pub fn estimate_point(
     seed: u64,
     gather: Option<&dyn IrradianceLookup>,
     guidance: Guidance,
+    buried_share: Option<f32>,
 ) -> Estimate {
     let (p, origin) = sample_frame(scene, &point.site);
     let at = PointInScene::new(scene, p, origin)
         .with_gather(gather)
-        .with_guidance(guidance);
+        .with_guidance(guidance)
+        .with_buried_share(buried_share);
     match point.budget {
         Some(n) => {
             let fixed = EstimatorSettings {

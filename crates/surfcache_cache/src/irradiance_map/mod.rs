@@ -413,6 +413,20 @@ impl SurfaceCache for IrradianceMaps {
         Some((later.samples() * w.points_per_sample * samples_per_point) as u64)
     }
 
+    /// A grid sample is buried above [`IrradianceMapSettings::buried_threshold`], a
+    /// crossing's foot above [`crossings::FOOT_BURIED_SHARE`].
+    fn buried_share(&self, i: usize) -> Option<f32> {
+        let w = self.working.as_ref()?;
+        let foot = w
+            .round_feet
+            .binary_search_by_key(&(i as u32), |f| f.1)
+            .is_ok();
+        Some(match foot {
+            true => crossings::FOOT_BURIED_SHARE,
+            false => self.settings.buried_threshold,
+        })
+    }
+
     /// Moves the samples into the grids' new orders with the round's estimates, fills
     /// buried samples, decides which grids double again, and packs.
     fn finish_round(

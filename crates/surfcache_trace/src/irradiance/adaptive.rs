@@ -3,7 +3,10 @@
 //! error C = se / (Ē + ε) meets its bound (docs/design.md, Estimator), and the statistics
 //! it reads (single samples, or randomised QMC replicates).
 
-use super::{BURIED_PROBE_SAMPLES, Estimate, EstimatorSettings, QMC_REPLICATES, ZERO_RUN_EVENTS};
+use super::{
+    BURIED_PROBE_SAMPLES, BURIED_SIGMAS, Estimate, EstimatorSettings, QMC_REPLICATES,
+    ZERO_RUN_EVENTS,
+};
 use crate::path_tracer::FirstHit;
 use glam::{DVec3, Vec3};
 use surfcache_core::sampling::{Rng, sobol_4d, splitmix64};
@@ -61,6 +64,9 @@ pub fn relative_error(mean: DVec3, std_error: DVec3, floor: f64) -> f64 {
 /// the stream) until C = se / (|offset + mean| + ε) ≤ `bound` from `min` samples on, or
 /// `settings.max_samples`; the value is offset + mean.
 ///
+/// `buried_share`: stops once the back-face count is surely above that share
+/// ([`surely_buried`]).
+///
 /// `unseen` > 0: while every sample is exactly zero (and at most half the first rays hit a
 /// back face), the standard error is at least [`zero_run_std_error`]`(n, unseen)` in every
 /// channel, compared with the brightest channel of the value (the missed light's colour is
@@ -73,6 +79,7 @@ pub(super) fn sample_adaptively(
     offset: Vec3,
     bound: f32,
     min: u32,
+    buried_share: Option<f32>,
     unseen: f64,
     mut draw: impl FnMut([f32; 5], &mut Rng) -> (Vec3, FirstHit, u32),
 ) -> Estimate {
@@ -96,12 +103,21 @@ pub(super) fn sample_adaptively(
         let c = relative_error(total, se, floor).max(zero_run.1);
         // Every first ray so far met the back of a single-sided surface: the point lies
         // inside a solid, and the caches discard it whatever more samples would say.
-        let buried = n >= BURIED_PROBE_SAMPLES && back == n;
+        let buried = n >= BURIED_PROBE_SAMPLES
+            && (back == n || buried_share.is_some_and(|s| surely_buried(back, n, s)));
         if n >= max || (n >= min && c <= bound as f64) || buried {
             break (mean, se.max(DVec3::splat(zero_run.0)));
         }
     };
     tally.estimate(mean, std_error, offset, unseen, floor)
+}
+
+/// Whether `back` of `n` first rays meeting a back face show a share above `share` by
+/// [`BURIED_SIGMAS`] binomial standard deviations: `back − s·n > k·√(n·s·(1 − s))`.
+/// Never for `share` ≥ 1 (burial detection off).
+fn surely_buried(back: u32, n: u32, share: f32) -> bool {
+    let (s, n) = (share as f64, n as f64);
+    s < 1.0 && back as f64 - s * n > BURIED_SIGMAS * (n * s * (1.0 - s)).max(0.0).sqrt()
 }
 
 /// One Owen scrambling per QMC replicate, keyed by (seed, key, replicate).

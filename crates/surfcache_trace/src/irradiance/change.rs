@@ -125,6 +125,7 @@ impl Change<'_> {
             self.offset,
             self.bound,
             CHANGE_MIN_SAMPLES,
+            None,
             0.0,
             |root, rng| {
                 let mut twin = rng.clone();

@@ -117,6 +117,11 @@ pub const ZERO_RUN_EVENTS: f64 = 1.841;
 /// 2·10⁻⁵ for the points (s ≤ ½) the caches keep.
 pub const BURIED_PROBE_SAMPLES: u32 = 16;
 
+/// Binomial standard deviations by which a point's count of first rays that met a back
+/// face must exceed its cache's burial threshold before sampling stops
+/// ([`PointInScene::with_buried_share`]).
+pub const BURIED_SIGMAS: f64 = 3.0;
+
 /// Independent randomised QMC replicates: sample `k` of a point belongs to replicate
 /// `k mod R`. The standard error comes from the spread of the replicate means, which
 /// (unlike the spread of single samples) sees the stratification's gain.
@@ -342,6 +347,7 @@ pub fn estimate(at: &PointInScene, settings: &EstimatorSettings, seed: u64, key:
         punctual,
         settings.max_rel_error,
         settings.min_samples,
+        at.buried_share,
         // Direct light alone, or one bounce gathered from a cache: every sample meets
         // the cache or the lights, so an all-zero run is a dark point, not missed light.
         if at.gather.is_some() || settings.max_bounces == Some(0) {
@@ -367,6 +373,9 @@ pub struct PointInScene<'a> {
     pub origin: Vec3,
     pub gather: Option<&'a dyn IrradianceLookup>,
     pub guidance: Guidance<'a>,
+    /// The back-face share above which the cache discards this point as buried, if it
+    /// does ([`Self::with_buried_share`]).
+    pub buried_share: Option<f32>,
 }
 
 impl<'a> PointInScene<'a> {
@@ -379,6 +388,7 @@ impl<'a> PointInScene<'a> {
             origin,
             gather: None,
             guidance: Guidance::default(),
+            buried_share: None,
         }
     }
 
@@ -391,6 +401,18 @@ impl<'a> PointInScene<'a> {
     /// Draws and records directions as `guidance` says.
     pub fn with_guidance(mut self, guidance: Guidance<'a>) -> Self {
         self.guidance = guidance;
+        self
+    }
+
+    /// Stops sampling once the point is surely buried for a cache that discards points
+    /// whose back-face share ([`Estimate::back_face_share`]) is above `share`: from
+    /// [`BURIED_PROBE_SAMPLES`] samples on, at the end of every round, when the count b
+    /// of first rays that met a back face in n samples exceeds the binomial test
+    /// `b − s·n > k·√(n·s·(1 − s))` with k = [`BURIED_SIGMAS`] (docs/design.md,
+    /// Estimator). Its estimate then says buried as a full one would, after a few
+    /// dozen samples instead of the point's cap.
+    pub fn with_buried_share(mut self, share: Option<f32>) -> Self {
+        self.buried_share = share;
         self
     }
 }
