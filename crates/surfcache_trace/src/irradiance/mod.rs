@@ -406,11 +406,10 @@ impl<'a> PointInScene<'a> {
 
     /// Stops sampling once the point is surely buried for a cache that discards points
     /// whose back-face share ([`Estimate::back_face_share`]) is above `share`: from
-    /// [`BURIED_PROBE_SAMPLES`] samples on, at the end of every round, when the count b
-    /// of first rays that met a back face in n samples exceeds the binomial test
-    /// `b − s·n > k·√(n·s·(1 − s))` with k = [`BURIED_SIGMAS`] (docs/design.md,
-    /// Estimator). Its estimate then says buried as a full one would, after a few
-    /// dozen samples instead of the point's cap.
+    /// [`BURIED_PROBE_SAMPLES`] samples on, at the end of every round, once the count of
+    /// first rays that met a back face passes the binomial test of docs/design.md
+    /// (Estimator, "Buried points"; [`BURIED_SIGMAS`]). Its estimate then says buried
+    /// as a full one would, after a few dozen samples instead of the point's cap.
     pub fn with_buried_share(mut self, share: Option<f32>) -> Self {
         self.buried_share = share;
         self
