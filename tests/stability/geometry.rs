@@ -110,8 +110,8 @@ fn floor_around_a_sunken_box(thresholds: [f32; 2]) -> [([f32; 2], [u64; 2]); 2] 
 /// altogether. The box stands in the middle of both floor triangles, where their only
 /// nearby order-2 sample (the centre of the diagonal) is buried; the valid ones are all
 /// far away and agree, so both grids stayed at order 2 and the floor next to the box was
-/// ~40 % too bright (the box's contact shadow unseen). A grid with both buried and valid
-/// samples, or crossed by another surface, now refines to its maximum order, and the
+/// ~40 % too bright (the box's contact shadow unseen). Cells with both buried and valid
+/// samples, or that another surface crosses, now refine to the maximum order, and the
 /// floor 2 mm to 1 cm outside the box matches the reference within the bake's tolerance
 /// (3 reference standard errors + 4·C·E) for both caches, detected or not.
 #[test]

@@ -101,6 +101,9 @@ impl CrossingLine {
 pub struct Probe {
     /// The nearest crossing within reach, if any.
     pub crossing: Option<CrossingLine>,
+    /// How far from the sample the probe met the surface of [`Probe::crossing`]
+    /// (infinite without one).
+    pub crossing_distance: f32,
     /// Barycentrics on the sample's triangle just beyond the nearest crossing met from
     /// behind, if that point lies on the triangle (module docs).
     pub exit: Option<Vec2>,
@@ -315,6 +318,27 @@ pub fn foot(
 }
 
 impl Probe {
+    /// What a probe of the same sample reaching only `reach` (no farther than this one's
+    /// reach) finds: the crossing and exit met within it. Each in-plane ray's nearest hit
+    /// is the same however far it may go, so this equals that shorter probe.
+    pub fn within(&self, reach: f32) -> Probe {
+        let crossing_kept = self.crossing_distance <= reach;
+        let exit_kept = self.exit_distance <= reach;
+        Probe {
+            crossing: self.crossing.filter(|_| crossing_kept),
+            crossing_distance: match crossing_kept {
+                true => self.crossing_distance,
+                false => f32::INFINITY,
+            },
+            exit: self.exit.filter(|_| exit_kept),
+            exit_distance: match exit_kept {
+                true => self.exit_distance,
+                false => f32::INFINITY,
+            },
+            touching: self.touching && exit_kept,
+        }
+    }
+
     /// Where the sample at `uv` that this probe describes is estimated: just beyond the
     /// crossing surface it lies on ([`Probe::touching`]), else at `uv`.
     pub fn site(&self, uv: Vec2) -> Vec2 {
@@ -395,6 +419,7 @@ pub fn probe(scene: &TracedScene, triangle: u32, uv: Vec2, front: bool, reach: f
     let exit = exit.map(|(_, uv)| uv);
     Probe {
         crossing: best.map(|(_, line)| line),
+        crossing_distance: best.map_or(f32::INFINITY, |(t, _)| t),
         exit,
         exit_distance,
         touching,

@@ -19,7 +19,7 @@ use surfcache_cache::{
 use surfcache_core::{
     Instance, Material, Mesh, Scene,
     glam::{Vec2, Vec3},
-    scenes::quad,
+    scenes::{quad, tiled_floor},
 };
 use surfcache_trace::TracedScene;
 
@@ -316,6 +316,117 @@ fn refinement_keeps_every_sample_and_asks_only_for_new_ones() {
             }
         }
     }
+}
+
+/// A 4-m floor (two triangles) that a wall pierces along a 1-m segment at x = 1.
+fn floor_with_wall() -> TracedScene {
+    let v = Vec3::new;
+    let floor = tiled_floor(4.0, 1);
+    let wall = quad(
+        "wall",
+        [
+            v(1., -0.5, 1.),
+            v(1., -0.5, 2.),
+            v(1., 0.5, 2.),
+            v(1., 0.5, 1.),
+        ],
+        Vec3::X,
+    );
+    let scene = Scene {
+        instances: vec![
+            Instance::new(floor, Material::default()),
+            Instance::new(wall, Material::default()),
+        ],
+        ..Default::default()
+    };
+    TracedScene::new(&scene).unwrap()
+}
+
+/// Each floor grid sample of an order-16 grid on the floor of [`floor_with_wall`]:
+/// triangle, barycentrics and position.
+fn floor_samples(traced: &TracedScene) -> Vec<(u32, Vec2, Vec3)> {
+    let mut out = Vec::new();
+    for t in 0..2u32 {
+        let [a, b, c] = traced.positions()[t as usize];
+        for d in 0..=16u32 {
+            for j in 0..=d {
+                let uv = Vec2::new((d - j) as f32, j as f32) / 16.0;
+                out.push((t, uv, a * (1.0 - uv.x - uv.y) + b * uv.x + c * uv.y));
+            }
+        }
+    }
+    out
+}
+
+/// Local refinement around a crossing: a wall pierces the floor, and E is the same
+/// everywhere (no sample fails a test). The floor's grids still reach their maximum
+/// order around the wall, where a crossing passes within reach of their samples, and
+/// stay coarse elsewhere: every floor sample within one spacing of the maximum order of
+/// the wall (away from its ends) is estimated, and most of the floor is interpolated.
+#[test]
+fn crossed_grids_refine_around_the_crossing_only() {
+    let traced = floor_with_wall();
+    let maps = IrradianceMaps::new(&traced, front_to_order_16());
+    let (maps, _) = bake_synthetic(&traced, maps, |_| (Vec3::ONE, 0.0));
+    let spacing = 4.0 * 2f32.sqrt() / 16.0;
+    let (mut near, mut far, mut interpolated) = (0, 0, 0);
+    for t in 0..2u32 {
+        assert!(maps.is_crossed(t, true), "floor triangle {t} not crossed");
+        assert_eq!(maps.order(t, true), 16);
+    }
+    for (t, uv, p) in floor_samples(&traced) {
+        // Distance from the wall's line on the floor, x = 1, away from the segment's
+        // ends (where the eight in-plane probes may pass by).
+        let distance = (p.x - 1.0).abs();
+        let samples = maps.diagnostic(t, uv, true).samples;
+        if distance < spacing && (1.1..=1.9).contains(&p.z) {
+            assert!(
+                samples > 0,
+                "{p} is {distance} m from the wall, not estimated"
+            );
+            near += 1;
+        } else if distance > 2.0 * spacing || !(0.8..=2.2).contains(&p.z) {
+            far += 1;
+            interpolated += (samples == 0) as u32;
+        }
+        assert!((maps.lookup(t, uv, true) - Vec3::ONE).abs().max_element() < 1e-3);
+    }
+    assert!(near >= 10, "{near} samples near the wall");
+    assert!(
+        2 * interpolated > far,
+        "{interpolated} of {far} far samples interpolated"
+    );
+}
+
+/// Away from the crossing, a crossed grid's cells follow the cell test: with a bump of
+/// light far from the wall, gentle enough that the grid's own test (5 %) passes at order
+/// 8, the cells on the bump are estimated where their interpolation would be off by more
+/// than the cell test's 1 %, so every interpolated sample stays within about that bound
+/// of E (without the cell test, samples on the bump were interpolated 2 % off).
+#[test]
+fn crossed_grids_estimate_where_the_cell_test_fails() {
+    let traced = floor_with_wall();
+    let f = |p: Vec3| {
+        let r2 = (p.x - 3.0).powi(2) + (p.z - 3.0).powi(2);
+        Vec3::splat(1.0 + 0.1 * (-r2 / (2.0 * 0.4 * 0.4)).exp())
+    };
+    let maps = IrradianceMaps::new(&traced, front_to_order_16());
+    let (maps, _) = bake_synthetic(&traced, maps, |sp| (f(sp.position), 0.0));
+    let (mut on_bump, mut interpolated) = (0, 0);
+    for (t, uv, p) in floor_samples(&traced) {
+        let samples = maps.diagnostic(t, uv, true).samples;
+        let got = maps.lookup(t, uv, true);
+        let e = ((got - f(p)).abs() / f(p)).max_element();
+        if samples == 0 {
+            interpolated += 1;
+            assert!(e < 0.02, "{p}: interpolated {got}, E {}", f(p));
+        }
+        if (p - Vec3::new(3.0, 0.0, 3.0)).length() < 0.4 {
+            on_bump += (samples > 0) as u32;
+        }
+    }
+    assert!(interpolated > 50, "{interpolated} interpolated samples");
+    assert!(on_bump >= 10, "{on_bump} samples estimated on the bump");
 }
 
 /// The forecast of later rounds that progress reports use: before the first refinement

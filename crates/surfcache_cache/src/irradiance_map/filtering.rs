@@ -3,7 +3,7 @@
 
 use super::{
     IrradianceMaps, Working,
-    grid::{grid_index, order_of_level},
+    grid::{coarse_neighbours, for_each_new_sample, grid_index, grid_size, order_of_level},
 };
 use crate::{
     burial::Burial,
@@ -27,9 +27,10 @@ struct Node {
 
 impl IrradianceMaps {
     /// Filters the valid estimates with their neighbours in space ([`filter_points`]),
-    /// each estimate once however many grids share it, its spacing that of its grid's
-    /// order (at most one sample spacing of the density); replaces `raw` and `std_error`
-    /// of their samples. Samples with a crossing line keep their own estimates and lend
+    /// each estimate once however many grids share it, its spacing the distance to the
+    /// nearest other estimated sample of its grid along a grid line ([`local_step`]; at
+    /// most one sample spacing of the density); replaces `raw` and `std_error` of their
+    /// samples (interpolated samples follow in [`Self::rederive`]). Samples with a crossing line keep their own estimates and lend
     /// them to nobody; the other samples of crossed grids share only with neighbours
     /// that nothing separates from them (an any-hit ray between the two ray origins).
     /// Estimates without samples are taps, not filtered. An incremental re-bake filters
@@ -50,7 +51,7 @@ impl IrradianceMaps {
             }
             let (t, front) = ((g / 2) as u32, g % 2 == 0);
             let [a, b, c] = scene.positions()[t as usize];
-            let spacing = (longest_edge(a, b, c) / n as f32).clamp(1e-4 * cap, cap);
+            let cell = longest_edge(a, b, c) / n as f32;
             let base = self.offsets[g] as usize;
             for d in 0..=n {
                 for j in 0..=d {
@@ -61,11 +62,12 @@ impl IrradianceMaps {
                     }
                     if node_of[id as usize] == NO_INDEX {
                         node_of[id as usize] = nodes.len() as u32;
+                        let step = local_step(w, base, n, d - j, j);
                         nodes.push(Node {
                             triangle: t,
                             uv: Vec2::new((d - j) as f32, j as f32) / n as f32,
                             front,
-                            spacing,
+                            spacing: (cell * step as f32).clamp(1e-4 * cap, cap),
                             guarded: w.crossed[g],
                         });
                         value.push(w.raw[k]);
@@ -114,4 +116,53 @@ impl IrradianceMaps {
         }
         true
     }
+
+    /// Interpolates every interpolated sample anew from the ends of the coarse edge it
+    /// halves, coarser orders first (filtering changed the estimates at the ends).
+    pub(super) fn rederive(&self, w: &mut Working) {
+        for g in 0..self.levels.len() {
+            let n = order_of_level(self.levels[g]);
+            let base = self.offsets[g] as usize;
+            if n < 4 || !w.derived[base..base + grid_size(n)].contains(&true) {
+                continue;
+            }
+            let mut o = 2;
+            while o <= n {
+                let step = n / o;
+                for_each_new_sample(o / 2, o, |i, j, _| {
+                    let k = base + grid_index(i * step, j * step);
+                    if !w.derived[k] {
+                        return;
+                    }
+                    let [[ai, aj], [bi, bj]] = coarse_neighbours(i, j);
+                    let a = base + grid_index(ai * step, aj * step);
+                    let b = base + grid_index(bi * step, bj * step);
+                    w.raw[k] = 0.5 * (w.raw[a] + w.raw[b]);
+                    w.std_error[k] = 0.5
+                        * (w.std_error[a] * w.std_error[a] + w.std_error[b] * w.std_error[b])
+                            .map(f32::sqrt);
+                });
+                o *= 2;
+            }
+        }
+    }
+}
+
+/// The distance, in spacings of the order-`n` grid at `base`, from sample `(i, j)` to
+/// the nearest estimated (not interpolated) sample along one of its six grid lines, a
+/// power of two; `n` when there is none. Where local refinement stopped early, estimates
+/// lie that many spacings apart and share with neighbours that far.
+fn local_step(w: &Working, base: usize, n: u32, i: u32, j: u32) -> u32 {
+    let (i, j, n) = (i as i64, j as i64, n as i64);
+    let mut h = 1;
+    while h < n {
+        for (di, dj) in [(1, 0), (-1, 0), (0, 1), (0, -1), (1, -1), (-1, 1)] {
+            let (a, b) = (i + di * h, j + dj * h);
+            if a >= 0 && b >= 0 && a + b <= n && !w.derived[base + grid_index(a as u32, b as u32)] {
+                return h as u32;
+            }
+        }
+        h *= 2;
+    }
+    n as u32
 }

@@ -1,6 +1,7 @@
-//! Grids that refine to their maximum order whatever their samples say: those another
-//! surface crosses and those a punctual light's shadow boundary crosses (the module docs
-//! of [`super`], Shadow probes and Crossings).
+//! Grids that refine whatever their samples say: those another surface crosses (around
+//! the crossing) and those a punctual light's shadow boundary crosses (everywhere, to
+//! their maximum order; the module docs of [`super`], Shadow probes, Local refinement and
+//! Crossings).
 
 use crate::{SampleSite, crossings};
 use glam::Vec2;
@@ -8,10 +9,10 @@ use surfcache_trace::TracedScene;
 
 /// Grid slots (`2·triangle + side`, among those `bake` marks) that another surface
 /// crosses or touches ([`crossings::grid_crossed`] at the order the grid starts at,
-/// `min(2, n_max)`). Such a grid refines to its maximum order whatever its samples say:
-/// when all its coarse samples lie on one side of the crossing (the lit overhang of a wall
-/// that pierces its neighbour, the thesis' known failure) they agree, and the refinement
-/// test sees nothing to refine. Costs [`crossings::PROBE_DIRECTIONS`] rays per point,
+/// `min(2, n_max)`). The cells of such a grid that the crossing passes near refine to the
+/// maximum order whatever its samples say: when all its coarse samples lie on one side of
+/// the crossing (the lit overhang of a wall that pierces its neighbour, the thesis' known
+/// failure) they agree, and the refinement test sees nothing to refine. Costs [`crossings::PROBE_DIRECTIONS`] rays per point,
 /// except for the grids whose answer `known` gives (a re-bake's grids that no changed
 /// surface comes near).
 pub fn crossed_grids(

@@ -7,17 +7,46 @@
 //! ([`grid_interpolate`]) and never crosses into another triangle.
 //!
 //! **Generator.** Round 0 asks for every grid at order `min(2, n_max)`. After each round,
-//! every grid that just doubled compares each *new* sample (one with an odd index coordinate) with
-//! the linear interpolation of the coarse grid there: the mean of the two coarse samples
-//! at the ends of the coarse edge it halves ([`coarse_neighbours`]). It doubles again
-//! while the largest difference exceeds
-//! [`IrradianceMapSettings::interpolation_error`] and its order is below its maximum
-//! `n_max = clamp(next_pow2(ceil(longest edge · density)), 1, max_order)`
+//! every grid that just doubled compares each *new* sample (one with an odd index
+//! coordinate) with the linear interpolation of the coarse grid there: the mean of the
+//! two coarse samples at the ends of the coarse edge it halves ([`coarse_neighbours`]).
+//! It doubles again while the largest difference exceeds
+//! [`IrradianceMapSettings::interpolation_error`] (the thesis' test) or a cell is active
+//! for a crossing or a burial boundary (Local refinement), and its order is below its
+//! maximum `n_max = clamp(next_pow2(ceil(longest edge · density)), 1, max_order)`
 //! ([`IrradianceMapSettings::max_order_for`]). Doubling keeps every sample ((i, j) of
-//! order n is (2i, 2j) of order 2n); only the new ones are estimated. A triangle no
-//! longer than one sample spacing (`longest edge · density ≤ 1`) keeps an order-1 grid,
-//! its three corners: on a finely tessellated mesh (Sponza at a coarse density) the maps
-//! then cost three samples per triangle side instead of six.
+//! order n is (2i, 2j) of order 2n); only new ones are estimated, and where a crossing
+//! or a burial boundary alone makes a grid double, only those local refinement asks
+//! for. A triangle no longer than one sample spacing (`longest edge · density ≤ 1`)
+//! keeps an order-1 grid, its three corners: on a finely tessellated mesh (Sponza at a
+//! coarse density) the maps then cost three samples per triangle side instead of six.
+//!
+//! **Local refinement** (the thesis' outlook: model no more than a scene needs). A grid
+//! whose test failed doubles whole: every new sample of its next round is estimated, as
+//! in the thesis. A grid that doubles only because a crossing or a burial boundary runs
+//! through it doubles *locally*: a cell (three neighbouring samples) is *active* when, of
+//! its corners, one is valid (not buried) and they span buried and valid samples, or a
+//! crossing passes one within [`crossings::LINE_REACH`] spacings of the grid's order
+//! (each sample's probe reaches that far at the order that made it), or one *failed* the
+//! cell test (the difference above, with [`IrradianceMapSettings::cell_sigmas`] standard
+//! errors for noise, above [`IrradianceMapSettings::cell_error`]); the new samples on
+//! the edges of active cells are estimated, and every other new sample, lying inside or
+//! between cells whose linear interpolation the cell test accepted, takes that
+//! interpolation, the mean of the edge's ends, as its value (*interpolated*: no estimate,
+//! no rays but its probes'). The cell test is tighter than the grid's (1 % beyond two
+//! standard errors against 5 % beyond three): the grid's decides whether to look closer
+//! at all, where noise must not refine a flat grid; the cell's decides which values are
+//! kept between a crossing's cells, where an interpolated sample is off by at most about
+//! the noise of an estimate there plus its bound. Storage and lookups stay those of the
+//! uniform grid of the grid's order. Grids on a punctual shadow edge and first doublings
+//! (orders 1 and 2) estimate every new sample; so does a sample that its probe finds on a
+//! crossing surface or with a crossing line. So a large floor triangle that a column
+//! pierces reaches its maximum order around the column, and the contact shadow there,
+//! while its open parts stop where the light is smooth, as they would without the
+//! column: the crossed and partly buried grids that refined to their maximum order
+//! everywhere took most of a Sponza bake's samples (docs/results.md, "Local refinement
+//! of irradiance maps"). Local refinement of every grid, the whole-grid test's included,
+//! saved more and cost accuracy (the same section).
 //!
 //! **Shadow probes.** A hard shadow narrower than the coarse sample spacing can fall
 //! between all of a grid's samples (the thesis' misjudged triangle), where no comparison
@@ -29,7 +58,8 @@
 //! the part of a difference that exceeds `k` combined standard errors counts:
 //! `e = max_c max(0, |ΔE_c| − k·σ_c) / (E_new,c + ε)` with
 //! `ΔE = E_new − (E_a + E_b)/2`, `σ² = se_new² + (se_a² + se_b²)/4` (per channel `c`),
-//! `k =` [`IrradianceMapSettings::noise_sigmas`] (default 3) and ε the estimator's floor
+//! `k =` [`IrradianceMapSettings::noise_sigmas`] (default 3; the cell test's
+//! [`IrradianceMapSettings::cell_sigmas`], default 2) and ε the estimator's floor
 //! ([`IrradianceMapSettings::floor`]). A grid refines when the largest `e` over its new
 //! samples exceeds the bound. Pure noise then passes with near certainty (it would need
 //! `|ΔE| > kσ + bound·(E + ε)`), while a real change of E between neighbours triggers
@@ -72,16 +102,20 @@
 //! ring from the valid ones ([`IrradianceMaps`] keeps the raw estimates while baking and
 //! refills after each round); a grid that is buried everywhere keeps its raw values.
 //! Buried samples are left out of the refinement test as new samples (their filled values
-//! are used as coarse neighbours). A grid with both buried and valid samples refines
-//! anyway, up to its maximum order: other geometry cuts through the triangle, and the
-//! light next to the cut (the contact shadow around a box standing in the middle of a
-//! large floor triangle, whose only sample near the box is buried) would otherwise pass
-//! the test unseen between the valid samples. A grid buried everywhere shows nothing and
-//! does not refine. Buried samples are counted in [`CacheStats::buried`].
+//! are used as coarse neighbours). A cell with both buried and valid corners is active
+//! whatever the tests say: other geometry cuts through it, and the light next to the
+//! cut (the contact shadow around a box standing in the middle of a large floor
+//! triangle, whose only sample near the box is buried) would otherwise pass the test
+//! unseen between the valid samples. A cell buried at every corner shows nothing and is
+//! not refined; its interpolated samples count as buried and are filled. Buried samples
+//! are counted in [`CacheStats::buried`].
 //!
 //! **Crossings** ([`crate::crossings`]). Grids that another surface crosses or touches
-//! ([`crossed_grids`]) refine to their maximum order, and each of their samples is probed
-//! in the surface's plane a little farther than one spacing of that order. A sample on a
+//! ([`crossed_grids`]) probe each new sample in the surface's plane: as far as
+//! [`crossings::LINE_REACH`] spacings of the grid's order, for the cells it makes active
+//! (Local refinement), so that the cells around a crossing refine to the maximum order;
+//! and as far as a little more than one spacing of the maximum order, for the line its
+//! lookups use (both from one probe, [`crossings::Probe::within`]). A sample on a
 //! crossing surface (a grid point on the line where a wall stands) is estimated just
 //! beyond it, on the open side. A sample that a crossing passes within reach keeps the
 //! crossing's line (in barycentrics, oriented towards the sample) and one more estimate
@@ -96,11 +130,12 @@
 //! **Filtering** (the thesis' outlook: sharing samples). Once no grid refines any more,
 //! every valid estimate of a bake is filtered with its neighbours in space
 //! ([`crate::filter::filter_points`], [`IrradianceMapSettings::filter`]): each estimate
-//! once however many corners share it, with the spacing of its grid's order (at most one
-//! sample spacing of the density), a weighted mean at the largest of three scales whose
-//! value the smaller ones agree with. Samples with a crossing line keep their own
-//! estimates; the other samples of crossed grids share only with neighbours an any-hit
-//! ray finds nothing between. The refinement test before saw each sample's own estimate.
+//! once however many corners share it, with the spacing at which estimates lie around it
+//! (at most one sample spacing of the density), a weighted mean at the largest of three
+//! scales whose value the smaller ones agree with. Samples with a crossing line keep
+//! their own estimates; the other samples of crossed grids share only with neighbours an
+//! any-hit ray finds nothing between. Interpolated samples are then interpolated anew
+//! from the filtered estimates. The refinement test before saw each sample's own estimate.
 //! An incremental re-bake does not filter: its estimates update values that were
 //! filtered when they were made (re-estimated ones meet the bound on their own), and a
 //! changed sample averaged with neighbours that kept their values would lose most of its
@@ -267,11 +302,8 @@ impl IrradianceMaps {
                 g % 2 == 0 || settings.both_sides || scene.material_of((g / 2) as u32).double_sided
             })
             .collect();
-        let mut shadow_edges = punctual_shadow_edges(scene, &max_orders, &refine);
+        let shadow_edges = punctual_shadow_edges(scene, &max_orders, &refine);
         let crossed = crossed_grids(scene, &max_orders, &refine, known);
-        for (forced, &crossed) in shadow_edges.iter_mut().zip(&crossed) {
-            *forced |= crossed;
-        }
         let links = if settings.share_corners {
             corner_links(scene, settings.share_angle.to_radians().cos(), &refine)
         } else {
@@ -466,9 +498,11 @@ impl SurfaceCache for IrradianceMaps {
         self.offsets = offsets;
         self.fill_buried(&mut w, total);
         self.buried = w.burial.iter().filter(|&&b| b != Burial::Valid).count() as u64;
-        self.decide_refinement(&mut w);
-        // The grids are final: share samples between neighbours, then refill.
+        self.decide_refinement(&mut w, scene);
+        // The grids are final: share samples between neighbours, interpolate anew, then
+        // refill.
         if !w.refine.contains(&true) && self.share_samples(scene, &mut w) {
+            self.rederive(&mut w);
             self.fill_buried(&mut w, total);
         }
         w.end_round();

@@ -3,7 +3,11 @@
 
 use super::{
     IrradianceMaps, Working,
-    grid::{corner_of, for_each_new_sample, grid_index, grid_size, order_of_level, sample_key},
+    grid::{
+        coarse_neighbours, corner_of, for_each_new_sample, grid_index, grid_size, order_of_level,
+        sample_key,
+    },
+    refinement::{halves_active_edge, near_reach},
     working::{LaterRounds, SampleProbe},
 };
 use crate::{
@@ -17,12 +21,14 @@ use rayon::prelude::*;
 use surfcache_core::{geometry::longest_edge, index::NO_INDEX, sampling::splitmix64};
 use surfcache_trace::{Estimate, TracedScene};
 
-/// Probes the new samples of this round's crossed grids ([`crossings::probe`], as far as
-/// one spacing of the grid's maximum order, where lookups use the lines), in the order
-/// [`SurfaceCache::next_round`] visits them: each sample's site (a sample on a crossing
-/// surface moves just beyond it, as lightmap texels do) and its crossing line, oriented
-/// from the site, in barycentric coordinates.
-fn probe_new_samples(scene: &TracedScene, w: &Working, levels: &[u8]) -> Vec<SampleProbe> {
+/// Probes the new samples of this round's crossed grids ([`crossings::probe`]), in the
+/// order [`SurfaceCache::next_round`] visits them: as far as one spacing of the grid's
+/// maximum order, where lookups use the lines, each sample's site (a sample on a
+/// crossing surface moves just beyond it, as lightmap texels do) and its crossing line,
+/// oriented from the site, in barycentric coordinates; and as far as the order's
+/// [`near_reach`], how far from it a crossing passes (local refinement; infinite for a
+/// re-bake's carried probe).
+fn probe_new_samples(scene: &TracedScene, w: &Working, levels: &[u8]) -> Vec<(SampleProbe, f32)> {
     // Per sample: its grid slot, its grid point, and the probe a re-bake carries for it.
     let mut sites = Vec::new();
     for &g in w.pending.iter().filter(|&&g| w.crossed[g as usize]) {
@@ -37,25 +43,27 @@ fn probe_new_samples(scene: &TracedScene, w: &Working, levels: &[u8]) -> Vec<Sam
                 NO_INDEX => NO_INDEX,
                 o => o + m as u32,
             };
-            sites.push((g, Vec2::new(i as f32 * inv, j as f32 * inv), prior));
+            sites.push((g, Vec2::new(i as f32 * inv, j as f32 * inv), n, prior));
         });
     }
     sites
         .par_iter()
-        .map(|&(g, uv, prior)| {
+        .map(|&(g, uv, n, prior)| {
             if prior != NO_INDEX {
-                return w.prior_probes[prior as usize];
+                return (w.prior_probes[prior as usize], f32::INFINITY);
             }
             let (t, front) = (g / 2, g % 2 == 0);
             let [a, b, c] = scene.positions()[t as usize];
             let reach =
                 crossings::LINE_REACH * longest_edge(a, b, c) / w.max_orders[t as usize] as f32;
-            let probe = crossings::probe(scene, t, uv, front, reach);
+            let far = crossings::probe(scene, t, uv, front, near_reach(scene, t, n).max(reach));
+            let probe = far.within(reach);
             let site = probe.site(uv);
             let kept = probe.crossing.and_then(|crossing| {
                 SampleCrossing::new(scene, t, front, &crossing, crossings::BARYCENTRIC, site)
             });
-            (site, kept.map(|(c, _)| c), kept.and_then(|(_, foot)| foot))
+            let made = (site, kept.map(|(c, _)| c), kept.and_then(|(_, foot)| foot));
+            (made, far.crossing_distance)
         })
         .collect()
 }
@@ -80,22 +88,29 @@ impl IrradianceMaps {
         if w.later.is_none() {
             // Before the first test only the forced grids' later rounds are counted.
             let mut later = LaterRounds::default();
+            // Crossed grids refine near their crossings, which the first test does not
+            // know yet: counted as if forced.
             for &g in &w.pending {
                 let (_, n) = w.round_orders(g as usize, &self.levels);
-                let forced = w.shadow_edges.get(g as usize).copied().unwrap_or(false);
+                let forced = w.shadow_edges.get(g as usize).copied().unwrap_or(false)
+                    || w.crossed[g as usize];
                 later.add_grid(n, w.max_orders[g as usize / 2], forced);
             }
             w.later = Some(later);
         }
         w.sources.clear();
         w.round_lines.clear();
+        w.round_distances.clear();
         w.round_probes.clear();
         w.round_feet.clear();
+        // New samples of grids refined locally, and how many of them are estimated.
+        let (mut local_new, mut local_estimated) = (0u64, 0u64);
         let mut probed = probe_new_samples(scene, w, &self.levels).into_iter();
         // Round point of each corner asked for in this round (only rounds that make
         // grids have corners to share).
         let mut corner_points = Vec::new();
-        for &g in &w.pending {
+        let pending = std::mem::take(&mut w.pending);
+        for &g in &pending {
             let (t, front) = (g / 2, g % 2 == 0);
             let (coarse, n) = w.round_orders(g as usize, &self.levels);
             if coarse == 0 && !w.links.is_empty() && corner_points.is_empty() {
@@ -108,16 +123,30 @@ impl IrradianceMaps {
                 _ => None,
             };
             let crossed = w.crossed[g as usize];
+            // Local refinement (module docs): past the first doubling, a grid that
+            // doubles for a crossing or a burial boundary alone estimates only the new
+            // samples beside active cells of the coarse grid.
+            let local = coarse >= 2
+                && !w.shadow_edges.get(g as usize).copied().unwrap_or(false)
+                && !w.whole.get(g as usize).copied().unwrap_or(false);
+            let coarse_base = self.offsets[g as usize] as usize;
+            let near = near_reach(scene, t, coarse);
             for_each_new_sample(coarse, n, |i, j, m| {
                 let mut uv = Vec2::new(i as f32 * inv, j as f32 * inv);
                 let mut line = NO_INDEX;
                 let mut probe = NO_INDEX;
+                let mut distance = f32::INFINITY;
                 let sample_key = sample_key(key, front, i, j, n);
+                let mut estimate = !local || halves_active_edge(w, coarse_base, coarse, i, j, near);
                 if crossed {
-                    let made = probed.next().expect("one probe per new sample");
+                    let (made, far) = probed.next().expect("one probe per new sample");
                     probe = w.probes.len() as u32;
                     w.probes.push(made);
+                    distance = far;
                     let (site, crossing, foot) = made;
+                    // A sample with a crossing line (and foot), or moved off a crossing
+                    // surface, is always estimated.
+                    estimate |= crossing.is_some() || site != uv;
                     uv = site;
                     if let Some(l) = crossing {
                         line = self.lines.len() as u32;
@@ -150,6 +179,15 @@ impl IrradianceMaps {
                 }
                 w.round_lines.push(line);
                 w.round_probes.push(probe);
+                w.round_distances.push(distance);
+                if local {
+                    local_new += 1;
+                    local_estimated += estimate as u64;
+                }
+                if !estimate {
+                    w.sources.push(NO_INDEX);
+                    return;
+                }
                 let corner = match (coarse, corner_of(i, j, n)) {
                     (0, Some(k)) if !corner_points.is_empty() => Some(3 * g as usize + k),
                     _ => None,
@@ -175,9 +213,16 @@ impl IrradianceMaps {
                 });
             });
         }
+        w.pending = pending;
         w.pending_points = points.len() - start;
-        if corner_points.is_empty() && !w.sources.is_empty() {
-            w.points_per_sample = w.pending_points as f64 / w.sources.len() as f64;
+        if local_new > 0
+            && let Some(later) = w.later.as_mut()
+        {
+            later.estimated_share = Some(local_estimated as f64 / local_new as f64);
+        }
+        let estimated = w.sources.iter().filter(|&&s| s != NO_INDEX).count();
+        if corner_points.is_empty() && estimated > 0 {
+            w.points_per_sample = w.pending_points as f64 / estimated as f64;
         }
     }
 
@@ -260,6 +305,8 @@ impl Working {
         let mut line_of = vec![NO_INDEX; total];
         let mut probe_of = vec![NO_INDEX; total];
         let mut estimate_id = vec![NO_INDEX; total];
+        let mut derived = vec![false; total];
+        let mut crossing_distance = vec![f32::INFINITY; total];
         for g in 0..slots {
             let (old, new) = (order_of_level(levels[g]), order_of_level(new_levels[g]));
             if old == 0 {
@@ -275,6 +322,9 @@ impl Working {
                 line_of[to..to + s].copy_from_slice(&self.line_of[from..from + s]);
                 probe_of[to..to + s].copy_from_slice(&self.probe_of[from..from + s]);
                 estimate_id[to..to + s].copy_from_slice(&self.estimate_id[from..from + s]);
+                derived[to..to + s].copy_from_slice(&self.derived[from..from + s]);
+                crossing_distance[to..to + s]
+                    .copy_from_slice(&self.crossing_distance[from..from + s]);
             } else {
                 for d in 0..=old {
                     for j in 0..=d {
@@ -286,6 +336,8 @@ impl Working {
                         line_of[b] = self.line_of[a];
                         probe_of[b] = self.probe_of[a];
                         estimate_id[b] = self.estimate_id[a];
+                        derived[b] = self.derived[a];
+                        crossing_distance[b] = self.crossing_distance[a];
                         burial[b] = if self.burial[a] == Burial::Valid {
                             Burial::Valid
                         } else {
@@ -302,6 +354,10 @@ impl Working {
         self.line_of = line_of;
         self.probe_of = probe_of;
         self.estimate_id = estimate_id;
+        self.derived = derived;
+        self.crossing_distance = crossing_distance;
+        // Failures speak for the test that saw them only.
+        self.failed = vec![false; total];
     }
 
     /// Stores the round's estimates as the new samples of the pending grids (now of
@@ -322,15 +378,38 @@ impl Working {
             let n = order_of_level(new_levels[g as usize]);
             let coarse = order_of_level(levels[g as usize]);
             let base = offsets[g as usize] as usize;
-            for_each_new_sample(coarse, n, |_, _, m| {
-                let point = self.sources[next] as usize;
+            for_each_new_sample(coarse, n, |i, j, m| {
+                let source = self.sources[next];
+                self.line_of[base + m] = self.round_lines[next];
+                self.probe_of[base + m] = self.round_probes[next];
+                self.crossing_distance[base + m] = self.round_distances[next];
+                next += 1;
+                if source == NO_INDEX {
+                    // Interpolated from the ends of the coarse edge it halves (their
+                    // places in the new layout hold their values already).
+                    let [[ai, aj], [bi, bj]] = coarse_neighbours(i, j);
+                    let (a, b) = (base + grid_index(ai, aj), base + grid_index(bi, bj));
+                    self.derived[base + m] = true;
+                    self.estimate_id[base + m] = NO_INDEX;
+                    self.raw[base + m] = 0.5 * (self.raw[a] + self.raw[b]);
+                    self.samples[base + m] = 0;
+                    self.std_error[base + m] = 0.5
+                        * (self.std_error[a] * self.std_error[a]
+                            + self.std_error[b] * self.std_error[b])
+                            .map(f32::sqrt);
+                    let both_valid =
+                        self.burial[a] == Burial::Valid && self.burial[b] == Burial::Valid;
+                    self.burial[base + m] = match both_valid {
+                        true => Burial::Valid,
+                        false => Burial::Buried,
+                    };
+                    return;
+                }
+                let point = source as usize;
                 let e = &estimates[point];
                 // A re-bake's buried sample that the edit did not reach stays buried.
                 let kept_buried = Prior::kept_buried(points[point].prior, e);
-                self.estimate_id[base + m] = self.estimates_seen + self.sources[next];
-                self.line_of[base + m] = self.round_lines[next];
-                self.probe_of[base + m] = self.round_probes[next];
-                next += 1;
+                self.estimate_id[base + m] = self.estimates_seen + source;
                 self.raw[base + m] = e.value;
                 self.samples[base + m] = e.samples;
                 self.std_error[base + m] = e.std_error;
@@ -351,6 +430,7 @@ impl Working {
         self.pending_points = 0;
         self.sources.clear();
         self.round_lines.clear();
+        self.round_distances.clear();
         self.round_probes.clear();
         self.round_feet.clear();
         // Priors serve the first round only.

@@ -10,8 +10,8 @@ use surfcache_trace::{Estimate, TracedScene};
 /// How irradiance maps refine and what they store.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IrradianceMapSettings {
-    /// Bound on the interpolation error e of new samples; a grid stops refining below it
-    /// (the thesis used 2.5–10 %). Default 0.05.
+    /// Bound on the interpolation error e of new samples: a grid with a new sample above
+    /// it refines (the thesis used 2.5–10 %). Default 0.05.
     pub interpolation_error: f32,
     /// Target samples per metre along a triangle's longest edge: sets each grid's maximum
     /// order, so equal-sized features get equal resolution. Default 64 (1.6 cm): with
@@ -48,6 +48,23 @@ pub struct IrradianceMapSettings {
     /// `iterations: 0` keeps every estimate on its own.
     #[serde(default)]
     pub filter: FilterSettings,
+    /// Bound on the interpolation error e of new samples, with [`Self::cell_sigmas`] for
+    /// k, within a grid that doubles for a crossing or a burial boundary alone: a cell
+    /// whose new samples all stay below it is interpolated from then on (module docs,
+    /// Local refinement). Default 0.01.
+    #[serde(default = "default_cell_error")]
+    pub cell_error: f32,
+    /// k of the cell test ([`Self::cell_error`]). Default 2.
+    #[serde(default = "default_cell_sigmas")]
+    pub cell_sigmas: f32,
+}
+
+fn default_cell_error() -> f32 {
+    0.01
+}
+
+fn default_cell_sigmas() -> f32 {
+    2.0
 }
 
 fn default_share_corners() -> bool {
@@ -71,6 +88,8 @@ impl Default for IrradianceMapSettings {
             share_corners: default_share_corners(),
             share_angle: default_share_angle(),
             filter: FilterSettings::default(),
+            cell_error: default_cell_error(),
+            cell_sigmas: default_cell_sigmas(),
         }
     }
 }

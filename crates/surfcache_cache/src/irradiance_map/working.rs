@@ -26,6 +26,18 @@ pub(super) struct Working {
     pub(super) filled_error: Vec<Vec3>,
     /// Burial state of every sample ([`Burial::Buried`] or [`Burial::Valid`] when estimated).
     pub(super) burial: Vec<Burial>,
+    /// Per sample: interpolated from the two coarse samples of the edge it halves, not
+    /// estimated (module docs, Local refinement).
+    pub(super) derived: Vec<bool>,
+    /// Per grid slot: the last refinement test failed, so every new sample of its next
+    /// round is estimated (module docs, Local refinement).
+    pub(super) whole: Vec<bool>,
+    /// Per sample: whether the refinement test that saw it as a new sample found it
+    /// off the coarse interpolation by more than the bound.
+    pub(super) failed: Vec<bool>,
+    /// Per sample of a crossed grid: how far from it its probe met a crossing surface,
+    /// within the reach of the order that made it (infinite: none, or not crossed).
+    pub(super) crossing_distance: Vec<f32>,
     /// Per sample: its crossing line in [`IrradianceMaps::lines`], or
     /// [`NO_INDEX`] (module docs, Crossings).
     pub(super) line_of: Vec<u32>,
@@ -39,6 +51,9 @@ pub(super) struct Working {
     pub(super) crossed: Vec<bool>,
     /// Per new grid sample of the current round, in the order of `sources`: its line.
     pub(super) round_lines: Vec<u32>,
+    /// Per new grid sample of the current round, in the order of `sources`: its
+    /// crossing distance (as `crossing_distance`).
+    pub(super) round_distances: Vec<f32>,
     /// Per line: the estimate at its sample's foot (NaN: none, or buried).
     pub(super) feet: Vec<Vec3>,
     /// This round's foot points: (line, round point).
@@ -46,15 +61,15 @@ pub(super) struct Working {
     /// Order (log2) of each grid slot's first round; empty: `min(2, n_max)` everywhere.
     pub(super) start_log2: Vec<u8>,
     /// Grid slots whose punctual lights' shadow boundary crosses them
-    /// ([`punctual_shadow_edges`]) or that another surface crosses ([`crossed_grids`]):
-    /// they refine to their maximum order.
+    /// ([`punctual_shadow_edges`]): they refine to their maximum order everywhere.
     pub(super) shadow_edges: Vec<bool>,
     /// Corner links: `links[3·slot + k]` is `3·slot' + k'` when corner k of grid `slot`
     /// takes the estimate of corner k' of grid `slot'`, its representative, or
     /// [`NO_INDEX`]; empty when corners are not shared ([`corner_links`]).
     pub(super) links: Vec<u32>,
     /// Per new grid sample of the current round, in [`for_each_new_sample`] order over
-    /// `pending`: the round point whose estimate it takes.
+    /// `pending`: the round point whose estimate it takes, or [`NO_INDEX`] for a sample
+    /// interpolated from its coarse neighbours.
     pub(super) sources: Vec<u32>,
     /// Per sample: which estimate it holds, numbered over all rounds (copies of a shared
     /// corner hold the same one), or [`NO_INDEX`] before it has one.
@@ -64,8 +79,8 @@ pub(super) struct Working {
     /// What the rounds after the one handed out are expected to ask for ([`LaterRounds`]):
     /// made with the first round, remade by every refinement test.
     pub(super) later: Option<LaterRounds>,
-    /// Round points per new grid sample in the last round that shared no corners (feet
-    /// add points); 1 before there was one.
+    /// Round points per estimated new grid sample in the last round that shared no
+    /// corners (feet add points); 1 before there was one.
     pub(super) points_per_sample: f64,
     /// An incremental re-bake ([`SurfaceCache::remap`]): its estimates update filtered
     /// values and are not filtered again (module docs, Filtering).
@@ -95,11 +110,12 @@ pub(super) type SampleProbe = (glam::Vec2, Option<SampleCrossing>, Option<glam::
 
 /// A forecast of the grid samples of the rounds after the one handed out (progress
 /// reports, [`SurfaceCache::later_samples`]). Every grid of that round will double up to
-/// its maximum order: a forced grid (module docs, Shadow probes, Buried samples and
-/// Crossings) surely, a tested one in each further round with the share of tested grids
-/// the last test doubled. Before the first test only the forced grids are counted
-/// (some of them turn out buried all over and stop, so that forecast is no lower bound;
-/// docs/results.md, "Progress of irradiance maps").
+/// its maximum order: a forced grid (an order-1 grid, a punctual shadow edge's) surely, a
+/// tested one in each further round with the share of tested grids the last test
+/// doubled, estimating the share of its new samples that the last round estimated
+/// (module docs, Local refinement). Before the first test only the forced and the
+/// crossed grids are counted, in full (some of them turn out buried all over and stop,
+/// so that forecast is no lower bound; docs/results.md, "Progress of irradiance maps").
 #[derive(Clone, Debug, Default, PartialEq)]
 pub(super) struct LaterRounds {
     /// New samples of forced grids over all later rounds.
@@ -109,6 +125,10 @@ pub(super) struct LaterRounds {
     pub(super) tested: Vec<u64>,
     /// The share of tested grids the last test doubled (0 before the first test).
     pub(super) rate: f64,
+    /// The share of the new samples of locally refined grids that the last round
+    /// estimated (the others are interpolated; module docs, Local refinement), taken to
+    /// hold again in each later round; `None` (all) before such a round.
+    pub(super) estimated_share: Option<f64>,
 }
 
 impl LaterRounds {
@@ -131,13 +151,13 @@ impl LaterRounds {
         }
     }
 
-    /// Expected new grid samples, `forced + Σ_k rate^k · tested[k−1]` (before the first
-    /// test, the forced grids' alone).
+    /// Expected new grid samples, `forced + Σ_k (rate · share)^k · tested[k−1]` with
+    /// `share` the estimated share (before the first test, the forced grids' alone).
     pub(super) fn samples(&self) -> f64 {
         let mut survive = 1.0;
         let mut total = self.forced as f64;
         for &t in &self.tested {
-            survive *= self.rate;
+            survive *= self.rate * self.estimated_share.unwrap_or(1.0);
             total += survive * t as f64;
         }
         total

@@ -67,8 +67,8 @@ pub struct BakeArgs {
     /// lightmaps: texels per metre [default: the method's own].
     #[arg(long)]
     density: Option<f32>,
-    /// Irradiance maps: refinement stops when new samples differ from the coarser
-    /// interpolation by at most this relative error [default: the method's own].
+    /// Irradiance maps: a grid cell stops refining when its new samples differ from the
+    /// coarser interpolation by at most this relative error [default: the method's own].
     #[arg(long)]
     interpolation_error: Option<f32>,
     /// Most bounce passes before the final one: pass 0 bakes direct light, each later
