@@ -137,10 +137,7 @@ impl IrradianceMaps {
                     let [[ai, aj], [bi, bj]] = coarse_neighbours(i, j);
                     let a = base + grid_index(ai * step, aj * step);
                     let b = base + grid_index(bi * step, bj * step);
-                    w.raw[k] = 0.5 * (w.raw[a] + w.raw[b]);
-                    w.std_error[k] = 0.5
-                        * (w.std_error[a] * w.std_error[a] + w.std_error[b] * w.std_error[b])
-                            .map(f32::sqrt);
+                    w.interpolate(k, a, b);
                 });
                 o *= 2;
             }

@@ -18,7 +18,7 @@ use crate::{
 };
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
-use surfcache_core::{geometry::longest_edge, index::NO_INDEX, sampling::splitmix64};
+use surfcache_core::{index::NO_INDEX, sampling::splitmix64};
 use surfcache_trace::{Estimate, TracedScene};
 
 /// Probes the new samples of this round's crossed grids ([`crossings::probe`]), in the
@@ -53,9 +53,8 @@ fn probe_new_samples(scene: &TracedScene, w: &Working, levels: &[u8]) -> Vec<(Sa
                 return (w.prior_probes[prior as usize], f32::INFINITY);
             }
             let (t, front) = (g / 2, g % 2 == 0);
-            let [a, b, c] = scene.positions()[t as usize];
-            let reach =
-                crossings::LINE_REACH * longest_edge(a, b, c) / w.max_orders[t as usize] as f32;
+            // Lines reach a spacing of the maximum order; nearness one of this order's.
+            let reach = near_reach(scene, t, w.max_orders[t as usize]);
             let far = crossings::probe(scene, t, uv, front, near_reach(scene, t, n).max(reach));
             let probe = far.within(reach);
             let site = probe.site(uv);
@@ -374,7 +373,8 @@ impl Working {
         threshold: f32,
     ) {
         let mut next = 0usize;
-        for &g in &self.pending {
+        for p in 0..self.pending.len() {
+            let g = self.pending[p];
             let n = order_of_level(new_levels[g as usize]);
             let coarse = order_of_level(levels[g as usize]);
             let base = offsets[g as usize] as usize;
@@ -391,12 +391,8 @@ impl Working {
                     let (a, b) = (base + grid_index(ai, aj), base + grid_index(bi, bj));
                     self.derived[base + m] = true;
                     self.estimate_id[base + m] = NO_INDEX;
-                    self.raw[base + m] = 0.5 * (self.raw[a] + self.raw[b]);
                     self.samples[base + m] = 0;
-                    self.std_error[base + m] = 0.5
-                        * (self.std_error[a] * self.std_error[a]
-                            + self.std_error[b] * self.std_error[b])
-                            .map(f32::sqrt);
+                    self.interpolate(base + m, a, b);
                     let both_valid =
                         self.burial[a] == Burial::Valid && self.burial[b] == Burial::Valid;
                     self.burial[base + m] = match both_valid {
@@ -421,6 +417,16 @@ impl Working {
             });
         }
         self.estimates_seen += estimates.len() as u32;
+    }
+
+    /// Sets sample `k`'s value and standard error to the mean of samples `a` and `b`, the
+    /// ends of the coarse edge it halves (an interpolated sample; module docs, Local
+    /// refinement).
+    pub(super) fn interpolate(&mut self, k: usize, a: usize, b: usize) {
+        self.raw[k] = 0.5 * (self.raw[a] + self.raw[b]);
+        self.std_error[k] = 0.5
+            * (self.std_error[a] * self.std_error[a] + self.std_error[b] * self.std_error[b])
+                .map(f32::sqrt);
     }
 
     /// Clears what only the round that just finished needs; priors serve the first
