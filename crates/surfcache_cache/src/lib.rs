@@ -367,6 +367,7 @@ impl CacheSettings {
             CacheSettings::IrradianceMap(m) => {
                 let maps = IrradianceMapSettings {
                     density: m.density * bake::BOUNCE_PASS_DENSITY,
+                    guiding: false,
                     ..*m
                 };
                 if maps.order_one_share(scene) <= bake::FINE_MESH_SHARE {

@@ -61,7 +61,8 @@ pub struct BakeOptions {
     pub share_corners: bool,
     /// Lightmaps: passes of the texel filter (the cache's own if `None`).
     pub filter_passes: Option<u32>,
-    /// Lightmaps: guided directions in later rounds (`--no-guiding` turns it off).
+    /// Lightmaps and irradiance maps: guided directions in later rounds (`--no-guiding`
+    /// turns it off).
     pub guiding: bool,
 }
 
@@ -181,10 +182,11 @@ impl BakeOptions {
             }
         }
         if !self.guiding {
-            let CacheSettings::Lightmap(lightmap) = &mut cache else {
-                bail!("--no-guiding applies to --method lightmap only");
-            };
-            lightmap.guiding = false;
+            match &mut cache {
+                CacheSettings::Lightmap(lightmap) => lightmap.guiding = false,
+                CacheSettings::IrradianceMap(maps) => maps.guiding = false,
+                _ => bail!("--no-guiding applies to --method lightmap and irradiance-map only"),
+            }
         }
         Ok(cache)
     }

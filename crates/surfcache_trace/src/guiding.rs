@@ -109,6 +109,28 @@ impl GuideRecord {
     }
 }
 
+/// A copy holds what the record held when it was copied.
+impl Clone for GuideRecord {
+    fn clone(&self) -> Self {
+        let copy = Self::new(self.unit);
+        copy.absorb(self);
+        copy
+    }
+}
+
+/// Records are equal when they hold the same sums in the same units.
+impl PartialEq for GuideRecord {
+    fn eq(&self, other: &Self) -> bool {
+        self.unit == other.unit
+            && self.samples() == other.samples()
+            && self
+                .cells
+                .iter()
+                .zip(&other.cells)
+                .all(|(a, b)| a.load(Ordering::Relaxed) == b.load(Ordering::Relaxed))
+    }
+}
+
 /// The cell of square point `u` (row-major).
 #[inline]
 fn cell(u: Vec2) -> usize {

@@ -48,6 +48,13 @@
 //! of irradiance maps"). Local refinement of every grid, the whole-grid test's included,
 //! saved more and cost accuracy (the same section).
 //!
+//! **Guiding** (the thesis' outlook: importance sampling). A grid that may still refine
+//! twice records where the light of its new samples came from, and the new samples of
+//! its later rounds draw their directions through the guide learnt from its earlier
+//! rounds ([`guides`]; docs/design.md, Guiding): a gallery floor lit through an arcade
+//! gets most of its light from a small part of its hemisphere, which plain cosine
+//! sampling finds by chance. [`IrradianceMapSettings::guiding`] turns it off.
+//!
 //! **Shadow probes.** A hard shadow narrower than the coarse sample spacing can fall
 //! between all of a grid's samples (the thesis' misjudged triangle), where no comparison
 //! of samples sees it. Grids that a punctual light's shadow boundary crosses — found by
@@ -190,12 +197,14 @@
 //! The parts: [`grid`] (one barycentric grid), [`settings`], [`sharing`] (shared
 //! corners), [`filtering`] (sharing samples between neighbours), [`forced_refinement`]
 //! (shadow probes and crossed grids), [`working`] (the state of a bake in progress),
-//! [`rounds`] (the points of each round and what its estimates change) and
-//! [`refinement`] (burial fill and the refinement test).
+//! [`rounds`] (the points of each round and what its estimates change), [`guides`]
+//! (direction guides of refining grids) and [`refinement`] (burial fill and the
+//! refinement test).
 
 mod filtering;
 mod forced_refinement;
 mod grid;
+mod guides;
 mod refinement;
 mod rounds;
 mod settings;
@@ -230,7 +239,7 @@ use surfcache_core::{
     geometry::{longest_edge, triangle_area},
     index::NO_INDEX,
 };
-use surfcache_trace::{Estimate, TracedScene};
+use surfcache_trace::{Estimate, Guidance, TracedScene};
 use working::{SampleProbe, Working};
 
 /// Per-triangle adaptive irradiance maps (module docs).
@@ -443,6 +452,15 @@ impl SurfaceCache for IrradianceMaps {
         };
         let later = w.later.as_ref()?;
         Some((later.samples() * w.points_per_sample * samples_per_point) as u64)
+    }
+
+    /// New samples of refining grids draw through their grid's guide and record into it
+    /// ([`guides`]); feet do neither.
+    fn guidance(&self, i: usize) -> Guidance<'_> {
+        match self.working.as_ref() {
+            Some(w) => w.guides.guidance(i),
+            None => Guidance::default(),
+        }
     }
 
     /// A grid sample is buried above [`IrradianceMapSettings::buried_threshold`], a

@@ -7,6 +7,7 @@ use super::{
         coarse_neighbours, corner_of, for_each_new_sample, grid_index, grid_size, order_of_level,
         sample_key,
     },
+    guides::GridGuides,
     refinement::{halves_active_edge, near_reach},
     working::{LaterRounds, SampleProbe},
 };
@@ -109,6 +110,17 @@ impl IrradianceMaps {
         // grids have corners to share).
         let mut corner_points = Vec::new();
         let pending = std::mem::take(&mut w.pending);
+        if self.settings.guiding && !w.guides.is_on() {
+            w.guides = GridGuides::new(w.refine.len(), self.settings.floor);
+        }
+        let orders: Vec<(u32, u32, u32)> = pending
+            .iter()
+            .map(|&g| {
+                let (_, n) = w.round_orders(g as usize, &self.levels);
+                (g, n, w.max_orders[g as usize / 2])
+            })
+            .collect();
+        w.guides.prepare(orders.into_iter());
         for &g in &pending {
             let (t, front) = (g / 2, g % 2 == 0);
             let (coarse, n) = w.round_orders(g as usize, &self.levels);
@@ -164,6 +176,7 @@ impl IrradianceMaps {
                             crossing?.foot_prior(&old_line, value)
                         });
                         w.round_feet.push((line, (points.len() - start) as u32));
+                        w.guides.push_point(None);
                         points.push(SamplePoint {
                             site: SampleSite::Surface {
                                 triangle: t,
@@ -200,6 +213,7 @@ impl IrradianceMaps {
                     corner_points[c] = (points.len() - start) as u32;
                 }
                 w.sources.push((points.len() - start) as u32);
+                w.guides.push_point(Some((g, i, j, n)));
                 points.push(SamplePoint {
                     site: SampleSite::Surface {
                         triangle: t,

@@ -57,6 +57,15 @@ pub struct IrradianceMapSettings {
     /// k of the cell test ([`Self::cell_error`]). Default 2.
     #[serde(default = "default_cell_sigmas")]
     pub cell_sigmas: f32,
+    /// New samples of a refining grid draw their directions through a guide learnt
+    /// from its earlier rounds (module docs, Guiding; docs/design.md, Guiding).
+    /// Default true.
+    #[serde(default = "default_guiding")]
+    pub guiding: bool,
+}
+
+fn default_guiding() -> bool {
+    true
 }
 
 fn default_cell_error() -> f32 {
@@ -90,6 +99,7 @@ impl Default for IrradianceMapSettings {
             filter: FilterSettings::default(),
             cell_error: default_cell_error(),
             cell_sigmas: default_cell_sigmas(),
+            guiding: default_guiding(),
         }
     }
 }

@@ -1,7 +1,10 @@
 //! The state of a bake in progress: raw estimates, their errors and burial, and what the
 //! current round asked for; dropped once the maps converge.
 
-use super::grid::{grid_size, order_of_level};
+use super::{
+    grid::{grid_size, order_of_level},
+    guides::GridGuides,
+};
 use crate::{Prior, burial::Burial, crossings::SampleCrossing};
 use glam::Vec3;
 
@@ -101,6 +104,9 @@ pub(super) struct Working {
     /// are probed again.
     pub(super) prior_probes: Vec<SampleProbe>,
     pub(super) prior_probe_offsets: Vec<u32>,
+    /// Direction guides of refining grids ([`GridGuides`]; off until the first round of
+    /// maps that guide).
+    pub(super) guides: GridGuides,
 }
 
 /// What probing a crossed grid's sample gives ([`crossings::probe`](crate::crossings::probe)):

@@ -89,8 +89,9 @@ pub struct BakeArgs {
     /// estimate on its own [default: 1].
     #[arg(long)]
     filter_passes: Option<u32>,
-    /// Lightmaps: draw every texel's directions cosine-weighted instead of through the
-    /// guide its block learnt in the first round (docs/design.md, Guiding).
+    /// Lightmaps and irradiance maps: draw every direction cosine-weighted instead of
+    /// through the guides texel blocks and refining grids learn from their earlier
+    /// rounds (docs/design.md, Guiding).
     #[arg(long)]
     no_guiding: bool,
     /// Output directory (created; replaced if it holds an earlier bake).
