@@ -49,9 +49,9 @@
 //! saved more and cost accuracy (the same section).
 //!
 //! **Guiding** (the thesis' outlook: importance sampling). A grid that may still refine
-//! twice records where the light of its new samples came from, and the new samples of
-//! its later rounds draw their directions through the guide learnt from its earlier
-//! rounds ([`guides`]; docs/design.md, Guiding): a gallery floor lit through an arcade
+//! twice records, region by region, where the light of its new samples came from, and
+//! the new samples of its later rounds draw their directions through the guide learnt
+//! from its earlier rounds ([`guides`]; docs/design.md, Guiding): a gallery floor lit through an arcade
 //! gets most of its light from a small part of its hemisphere, which plain cosine
 //! sampling finds by chance. [`IrradianceMapSettings::guiding`] turns it off.
 //!
@@ -454,8 +454,8 @@ impl SurfaceCache for IrradianceMaps {
         Some((later.samples() * w.points_per_sample * samples_per_point) as u64)
     }
 
-    /// New samples of refining grids draw through their grid's guide and record into it
-    /// ([`guides`]); feet do neither.
+    /// New samples of refining grids draw through their region's guide and record into
+    /// its record ([`guides`]); feet do neither.
     fn guidance(&self, i: usize) -> Guidance<'_> {
         match self.working.as_ref() {
             Some(w) => w.guides.guidance(i),
