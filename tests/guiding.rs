@@ -259,6 +259,15 @@ fn room_with_a_ceiling_hole() -> (TracedScene, [Vec3; 4]) {
     (scene, hole)
 }
 
+/// 60 points on the floor of [`room_with_a_ceiling_hole`], away from its walls.
+fn floor_points() -> impl Iterator<Item = Vec3> {
+    let mut points = common::Points(0x5eed);
+    (0..60).map(move |_| {
+        let x = -0.8 + 1.6 * points.next_f32();
+        Vec3::new(x, 0.0, -0.8 + 1.6 * points.next_f32())
+    })
+}
+
 /// Every one of 60 floor points of [`room_with_a_ceiling_hole`] (away from the walls)
 /// looked up in `cache` within four standard errors of a bound `rel` (floor `floor`) of
 /// Lambert's formula, plus `slack` of it (a cache's interpolation bound), plus the most E
@@ -272,14 +281,9 @@ fn assert_floor_matches_lambert(
     reach: f32,
 ) -> Vec<f32> {
     let v = Vec3::new;
-    let mut points = common::Points(0x5eed);
-    (0..60)
-        .map(|k| {
-            let x = v(
-                -0.8 + 1.6 * points.next_f32(),
-                0.0,
-                -0.8 + 1.6 * points.next_f32(),
-            );
+    floor_points()
+        .enumerate()
+        .map(|(k, x)| {
             let expected = common::polygon_irradiance(x, Vec3::Y, hole, SKY);
             let got = common::lookup(cache, scene, x, Vec3::Y);
             let spread = [v(reach, 0., reach), v(reach, 0., -reach)]
@@ -340,16 +344,8 @@ fn irradiance_maps_of_a_room_lit_through_a_ceiling_hole_match_lamberts_formula()
     // of their cosine-weighted hemisphere stop on runs that met it too rarely, up to
     // 25 times too dark; docs/results.md, "Guided irradiance maps".)
     let (plain, _) = common::bake(&scene, maps(false), estimator);
-    let mut points = common::Points(0x5eed);
-    let without: Vec<f32> = (0..60)
-        .map(|_| {
-            let x = Vec3::new(
-                -0.8 + 1.6 * points.next_f32(),
-                0.0,
-                -0.8 + 1.6 * points.next_f32(),
-            );
-            common::lookup(plain.as_ref(), &scene, x, Vec3::Y).x
-        })
+    let without: Vec<f32> = floor_points()
+        .map(|x| common::lookup(plain.as_ref(), &scene, x, Vec3::Y).x)
         .collect();
     assert_ne!(got, without);
 }

@@ -76,31 +76,33 @@ impl GridGuides {
         !self.record_of.is_empty()
     }
 
-    /// Before a round: each grid of `grids`, `(slot, order this round, maximum order)`,
-    /// that recorded in earlier rounds gets the guides its records ask for, and one that
-    /// may still refine twice after this round's order (`4·n ≤ n_max`) starts recording.
-    pub(super) fn prepare(&mut self, grids: impl Iterator<Item = (u32, u32, u32)>) {
-        if !self.is_on() {
-            return;
-        }
+    /// Before a round: forgets the last round's guides and points.
+    pub(super) fn start_round(&mut self) {
         self.guides.clear();
         self.guide_of.fill(NO_INDEX);
         self.round_record.clear();
-        for (g, n, max) in grids {
-            let g = g as usize;
-            match self.record_of[g] {
-                NO_INDEX if 4 * n <= max => {
-                    let r = (max / REGION_SPACINGS).clamp(1, 128);
-                    self.record_of[g] = self.records.len() as u32;
-                    self.regions_of[g] = r as u8;
-                    let cells = (r * (r + 1) / 2) as usize;
-                    self.records
-                        .extend((0..cells).map(|_| GuideRecord::new(self.unit)));
-                    self.guide_of.resize(self.records.len(), NO_INDEX);
-                }
-                NO_INDEX => {}
-                first => self.learn(first as usize, self.regions_of[g] as u32),
+    }
+
+    /// Grid slot `g`, at order `n` this round and maximum order `max`, gets the guides
+    /// its records ask for if it recorded in earlier rounds, and starts recording if it
+    /// may still refine twice after this round's order (`4·n ≤ n_max`).
+    pub(super) fn prepare_grid(&mut self, g: u32, n: u32, max: u32) {
+        if !self.is_on() {
+            return;
+        }
+        let g = g as usize;
+        match self.record_of[g] {
+            NO_INDEX if 4 * n <= max => {
+                let r = (max / REGION_SPACINGS).clamp(1, 128);
+                self.record_of[g] = self.records.len() as u32;
+                self.regions_of[g] = r as u8;
+                let cells = (r * (r + 1) / 2) as usize;
+                self.records
+                    .extend((0..cells).map(|_| GuideRecord::new(self.unit)));
+                self.guide_of.resize(self.records.len(), NO_INDEX);
             }
+            NO_INDEX => {}
+            first => self.learn(first as usize, self.regions_of[g] as u32),
         }
     }
 
@@ -108,27 +110,33 @@ impl GridGuides {
     /// `first`: a region's own where it recorded enough, else the whole grid's.
     fn learn(&mut self, first: usize, r: u32) {
         let records = first..first + (r * (r + 1) / 2) as usize;
-        let whole = match r {
-            1 => None,
-            _ => {
-                let pooled = GuideRecord::new(self.unit);
-                self.records[records.clone()]
-                    .iter()
-                    .for_each(|rec| pooled.absorb(rec));
-                Some(DirectionGuide::from_record(&pooled))
-            }
-        };
-        for k in records {
-            let own = self.records[k].samples() >= REGION_SAMPLES || whole.is_none();
-            let guide = match (own, &whole) {
-                (true, _) => DirectionGuide::from_record(&self.records[k]),
-                (false, Some(w)) => w.clone(),
-                (false, None) => None,
+        // The whole grid's guide, made once, when a region first needs it.
+        let mut whole: Option<u32> = None;
+        for k in records.clone() {
+            let guide = if r == 1 || self.records[k].samples() >= REGION_SAMPLES {
+                self.push_guide(DirectionGuide::from_record(&self.records[k]))
+            } else {
+                *whole.get_or_insert_with(|| {
+                    let pooled = GuideRecord::new(self.unit);
+                    self.records[records.clone()]
+                        .iter()
+                        .for_each(|rec| pooled.absorb(rec));
+                    let guide = DirectionGuide::from_record(&pooled);
+                    self.push_guide(guide)
+                })
             };
-            if let Some(guide) = guide {
-                self.guide_of[k] = self.guides.len() as u32;
+            self.guide_of[k] = guide;
+        }
+    }
+
+    /// Stores `guide`, if any: its index in `guides`, or [`NO_INDEX`].
+    fn push_guide(&mut self, guide: Option<DirectionGuide>) -> u32 {
+        match guide {
+            Some(guide) => {
                 self.guides.push(guide);
+                self.guides.len() as u32 - 1
             }
+            None => NO_INDEX,
         }
     }
 

@@ -113,17 +113,11 @@ impl IrradianceMaps {
         if self.settings.guiding && !w.guides.is_on() {
             w.guides = GridGuides::new(w.refine.len(), self.settings.floor);
         }
-        let orders: Vec<(u32, u32, u32)> = pending
-            .iter()
-            .map(|&g| {
-                let (_, n) = w.round_orders(g as usize, &self.levels);
-                (g, n, w.max_orders[g as usize / 2])
-            })
-            .collect();
-        w.guides.prepare(orders.into_iter());
+        w.guides.start_round();
         for &g in &pending {
             let (t, front) = (g / 2, g % 2 == 0);
             let (coarse, n) = w.round_orders(g as usize, &self.levels);
+            w.guides.prepare_grid(g, n, w.max_orders[t as usize]);
             if coarse == 0 && !w.links.is_empty() && corner_points.is_empty() {
                 corner_points = vec![NO_INDEX; w.links.len()];
             }
