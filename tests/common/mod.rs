@@ -140,11 +140,19 @@ pub fn bake(
     cache: CacheSettings,
     estimator: EstimatorSettings,
 ) -> (Arc<Cache>, f32) {
-    let mut job = BakeJob::new(BakeSettings {
-        cache,
-        estimator,
-        ..Default::default()
-    });
+    bake_with(
+        scene,
+        BakeSettings {
+            cache,
+            estimator,
+            ..Default::default()
+        },
+    )
+}
+
+/// A complete bake with `settings`: the final cache and the floor ε the job measured.
+pub fn bake_with(scene: &TracedScene, settings: BakeSettings) -> (Arc<Cache>, f32) {
+    let mut job = BakeJob::new(settings);
     while !job.step(scene, 4096) {}
     let floor = job.floor().expect("the job measured the scene");
     let outcome = job.into_outcome().expect("the bake finished");
