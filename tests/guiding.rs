@@ -6,17 +6,20 @@
 mod common;
 
 use surfcache::cache::{
-    CacheSettings, SurfaceCache, bake::BakeSettings, irradiance_map::IrradianceMapSettings,
+    CacheSettings, SurfaceCache,
+    bake::{BakeJob, BakeSettings},
+    irradiance_map::IrradianceMapSettings,
     lightmap::LightmapSettings,
 };
 use surfcache::core::{
     Environment, EnvironmentMap, Instance, Material, Scene,
+    geometry::orthonormal_basis,
     glam::{Vec2, Vec3},
-    sampling::Rng,
+    sampling::{Rng, cosine_hemisphere_square},
     scenes::{cuboid, quad},
 };
 use surfcache::trace::{
-    EstimatorSettings, Guidance, PointInScene, Sampler, TracedScene, estimate,
+    EstimatorSettings, Guidance, IrradianceLookup, PointInScene, Sampler, TracedScene, estimate,
     guiding::{DirectionGuide, GuideRecord},
 };
 
@@ -303,18 +306,55 @@ fn assert_floor_matches_lambert(
         .collect()
 }
 
-#[test]
-fn room_lit_through_a_ceiling_hole_matches_lamberts_formula() {
-    // The texels' later rounds are guided. Bilinear lookups blend texels within one
-    // texel of a point.
-    let (scene, hole) = room_with_a_ceiling_hole();
-    let settings = CacheSettings::Lightmap(LightmapSettings {
+/// Lightmaps of [`room_with_a_ceiling_hole`], 16 texels per metre.
+fn room_lightmaps() -> CacheSettings {
+    CacheSettings::Lightmap(LightmapSettings {
         texels_per_metre: 16.0,
         ..Default::default()
-    });
+    })
+}
+
+#[test]
+fn room_lit_through_a_ceiling_hole_matches_lamberts_formula() {
+    // The texels' first round draws through the guides the bounce passes lend, their
+    // later rounds through their own. Bilinear lookups blend texels within one texel of
+    // a point.
+    let (scene, hole) = room_with_a_ceiling_hole();
     let rel = 0.02;
-    let (cache, floor) = common::bake(&scene, settings, common::estimator_with(rel, 64, 4096, 0.0));
+    let estimator = common::estimator_with(rel, 64, 4096, 0.0);
+    let (cache, floor) = common::bake(&scene, room_lightmaps(), estimator);
     assert_floor_matches_lambert(cache.as_ref(), &scene, &hole, (rel, floor, 0.0), 1.0 / 16.0);
+}
+
+#[test]
+fn the_final_pass_borrows_guides_that_point_at_the_opening() {
+    // A lightmap bake of the room: its bounce passes record where their texels' light
+    // came from, and the final pass's first round, which has learnt nothing yet, draws
+    // through those guides. At floor points they must favour the hole.
+    let (scene, hole) = room_with_a_ceiling_hole();
+    let mut job = BakeJob::new(BakeSettings {
+        cache: room_lightmaps(),
+        estimator: common::estimator_with(0.02, 64, 4096, 0.0),
+        ..Default::default()
+    });
+    while !job.step(&scene, 4096) {}
+    let outcome = job.into_outcome().expect("the bake finished");
+    let bounce = &outcome.passes[outcome.passes.len() - 2];
+    let centre = hole.iter().copied().sum::<Vec3>() / 4.0;
+    let (t, b) = orthonormal_basis(Vec3::Y);
+    let mut guided = 0;
+    for x in floor_points() {
+        let (triangle, uv, front) = common::locate(&scene, x, Vec3::Y);
+        let Some(guide) = bounce.guide(triangle, uv, front) else {
+            continue;
+        };
+        guided += 1;
+        let w = (centre - x).normalize();
+        let square = cosine_hemisphere_square(Vec3::new(t.dot(w), b.dot(w), w.y));
+        let density = guide.density(square);
+        assert!(density > 2.0, "at {x}: density {density} towards the hole");
+    }
+    assert!(guided >= 54, "{guided} of 60 floor points have a guide");
 }
 
 #[test]

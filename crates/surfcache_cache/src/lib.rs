@@ -33,7 +33,9 @@ use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use surfcache_core::index::NO_INDEX;
-use surfcache_trace::{Estimate, EstimatorSettings, Guidance, IrradianceLookup, TracedScene};
+use surfcache_trace::{
+    Estimate, EstimatorSettings, Guidance, IrradianceLookup, TracedScene, guiding::DirectionGuide,
+};
 
 pub use irradiance_map::{IrradianceMapSettings, IrradianceMaps};
 pub use lightmap::{LightmapSettings, Lightmaps};
@@ -190,6 +192,13 @@ pub trait SurfaceCache: Send + Sync {
     /// plain cosine-weighted directions, nothing recorded.
     fn guidance(&self, _i: usize) -> Guidance<'_> {
         Guidance::default()
+    }
+
+    /// Whether a point that [`Self::guidance`] gives no guide draws through the guide the
+    /// pass it gathers from learnt where it lies ([`IrradianceLookup::guide`];
+    /// docs/design.md, Guiding). The default: no.
+    fn borrows_guides(&self) -> bool {
+        false
     }
 
     /// The back-face share above which the cache will discard point `i` of the round
@@ -505,6 +514,10 @@ impl SurfaceCache for Cache {
         self.inner().guidance(i)
     }
 
+    fn borrows_guides(&self) -> bool {
+        self.inner().borrows_guides()
+    }
+
     fn buried_share(&self, i: usize) -> Option<f32> {
         self.inner().buried_share(i)
     }
@@ -560,6 +573,15 @@ impl IrradianceLookup for Cache {
             Self::Vertex(_) => 0.0,
             Self::IrradianceMap(c) => 0.5 / c.settings().density,
             Self::Lightmap(c) => 0.5 / c.settings().texels_per_metre,
+        }
+    }
+
+    /// A lightmap's guide of the texel block around the point; the other caches keep
+    /// none once baked.
+    fn guide(&self, triangle: u32, uv: Vec2, front: bool) -> Option<DirectionGuide> {
+        match self {
+            Self::Lightmap(c) => c.guide_at(triangle, uv, front),
+            _ => None,
         }
     }
 }

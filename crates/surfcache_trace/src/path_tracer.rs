@@ -2,6 +2,7 @@
 //! with or without next-event estimation.
 
 use crate::{
+    guiding::DirectionGuide,
     light_sampling::power_heuristic,
     traced_scene::{SurfacePoint, TracedScene},
 };
@@ -46,6 +47,13 @@ pub trait IrradianceLookup: Sync {
     fn albedo_footprint(&self) -> f32 {
         0.0
     }
+
+    /// The direction guide the cache learnt at barycentrics `uv` of `triangle` on the
+    /// given side while it was baked (docs/design.md, Guiding), for a point of the next
+    /// pass that has learnt none of its own. `None`, the default, where it learnt none.
+    fn guide(&self, _triangle: u32, _uv: Vec2, _front: bool) -> Option<DirectionGuide> {
+        None
+    }
 }
 
 /// Angular width (radians) one gather ray stands for: a hit at distance r reads the
@@ -74,6 +82,9 @@ pub struct PathSample {
     pub first_hit: FirstHit,
     /// Rays traced for it (closest-hit and shadow rays).
     pub rays: u32,
+    /// Weight of its first direction among cosine-weighted ones, `cos θ/π / p(ω)`: 1/g
+    /// when a guide drew it, else 1 (what a back-face share is counted with).
+    pub first_weight: f32,
 }
 
 impl TracedScene {
@@ -324,6 +335,7 @@ impl TracedScene {
             radiance,
             first_hit: first_hit.unwrap_or_default(),
             rays,
+            first_weight: 1.0,
         }
     }
 }

@@ -2,7 +2,7 @@
 //! bounded number of points.
 
 use super::{Previous, estimate_point};
-use crate::{SamplePoint, SurfaceCache};
+use crate::{SamplePoint, SampleSite, SurfaceCache};
 use rayon::prelude::*;
 use std::sync::Arc;
 use surfcache_trace::{Estimate, EstimatorSettings, IrradianceLookup, TracedScene};
@@ -149,6 +149,7 @@ impl<C: SurfaceCache> Baker<C> {
         let gather = self.gather.as_deref().map(|g| g as &dyn IrradianceLookup);
         let previous = self.previous.as_ref();
         let cache = &self.cache;
+        let borrows = cache.borrows_guides();
         self.round[start..end]
             .par_iter()
             .enumerate()
@@ -157,7 +158,24 @@ impl<C: SurfaceCache> Baker<C> {
                     .and_then(|prev| prev.update(scene, p, settings, seed, gather))
                     .unwrap_or_else(|| {
                         let i = start + j;
-                        let (guidance, buried) = (cache.guidance(i), cache.buried_share(i));
+                        let (mut guidance, buried) = (cache.guidance(i), cache.buried_share(i));
+                        // No guide of its own yet: the gathered pass's, where it learnt one.
+                        let borrowed = match (gather, p.site) {
+                            (
+                                Some(g),
+                                SampleSite::Surface {
+                                    triangle,
+                                    uv,
+                                    front,
+                                },
+                            ) if borrows && guidance.guide.is_none() => {
+                                g.guide(triangle, uv, front)
+                            }
+                            _ => None,
+                        };
+                        if borrowed.is_some() {
+                            guidance.guide = borrowed.as_ref();
+                        }
                         estimate_point(scene, p, settings, seed, gather, guidance, buried)
                     })
             })

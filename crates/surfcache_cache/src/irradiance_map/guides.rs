@@ -13,7 +13,9 @@
 //! region's guide is its own once it recorded [`REGION_SAMPLES`] samples, else the guide
 //! of its whole grid. Grids of small triangles, which cannot refine that far, keep no
 //! record: the records sit on the few large triangles whose deep rounds take most of a
-//! level's samples.
+//! level's samples. Points without a guide of their own draw through the guide a
+//! lightmap bounce pass learnt where they lie (docs/design.md, Guiding, "Borrowed
+//! guides").
 
 use super::grid::grid_index;
 use surfcache_core::index::NO_INDEX;

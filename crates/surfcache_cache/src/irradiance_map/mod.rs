@@ -463,6 +463,10 @@ impl SurfaceCache for IrradianceMaps {
         }
     }
 
+    fn borrows_guides(&self) -> bool {
+        self.settings.guiding
+    }
+
     /// A grid sample is buried above [`IrradianceMapSettings::buried_threshold`], a
     /// crossing's foot above [`crossings::FOOT_BURIED_SHARE`].
     fn buried_share(&self, i: usize) -> Option<f32> {

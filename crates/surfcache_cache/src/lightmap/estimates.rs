@@ -2,7 +2,7 @@
 //! ([`crate::filter`]), and after the last round counted, filled and packed into stored
 //! texels.
 
-use super::{Lightmaps, SamplingPlan, TexelGuides};
+use super::{Lightmaps, SamplingPlan};
 use crate::{
     CacheStats,
     burial::Burial,
@@ -161,7 +161,8 @@ impl Lightmaps {
         });
     }
 
-    /// Drops what only baking needs.
+    /// Drops what only baking needs (the guides' records stay: a pass gathering from
+    /// this one borrows them, `Lightmaps::guide_at`).
     fn drop_working_state(&mut self) {
         self.slots = Vec::new();
         self.priors = Vec::new();
@@ -170,7 +171,7 @@ impl Lightmaps {
         self.pending = Vec::new();
         self.site_uv = Vec::new();
         self.feet = Vec::new();
-        self.guides = TexelGuides::default();
+        self.guides.forget_guides();
     }
 }
 

@@ -8,6 +8,10 @@
 //! texel's own samples could, and as rounds double their samples, the guides of the
 //! texels still sampling improve with them (the training schedule of Müller et al.
 //! 2017). A round's guide depends only on earlier rounds, so every round stays unbiased.
+//!
+//! A lightmap records whether or not it draws through guides itself (the bounce passes
+//! do not), and keeps its records once baked: the pass that gathers from it borrows
+//! them for points that have no guide of their own ([`super::Lightmaps::guide_at`]).
 
 use super::InstanceMap;
 use surfcache_core::index::NO_INDEX;
@@ -89,6 +93,12 @@ impl TexelGuides {
     pub(super) fn guide(&self, slot: usize) -> Option<&DirectionGuide> {
         let g = *self.block_guide.get(self.block_of(slot)?)?;
         self.guides.get(g as usize)
+    }
+
+    /// Drops the guides of the last round, keeping the records.
+    pub(super) fn forget_guides(&mut self) {
+        self.block_guide = Vec::new();
+        self.guides = Vec::new();
     }
 
     /// Replaces the guides by those the records ask for in the blocks that hold one of

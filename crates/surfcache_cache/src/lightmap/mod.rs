@@ -58,7 +58,9 @@ use lookup::bilinear_packed;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use surfcache_core::{geometry::interpolate, index::NO_INDEX};
-use surfcache_trace::{Estimate, EstimatorSettings, Guidance, TracedScene};
+use surfcache_trace::{
+    Estimate, EstimatorSettings, Guidance, TracedScene, guiding::DirectionGuide,
+};
 
 /// How lightmaps are laid out and which texels are trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -299,6 +301,27 @@ impl Lightmaps {
         self.uv1[t as usize]
     }
 
+    /// The guide of the texel block that holds the texel under barycentrics `uv` of
+    /// `triangle` on the given side, from everything the bake recorded there
+    /// ([`guides`]); `None` where it recorded nothing, or light spread over the whole
+    /// hemisphere.
+    pub fn guide_at(&self, triangle: u32, uv: Vec2, front: bool) -> Option<DirectionGuide> {
+        let layer = match (front, self.layers) {
+            (true, _) => 0,
+            (false, 2) => 1,
+            _ => return None,
+        };
+        let t = triangle as usize;
+        let m = &self.maps[self.triangle_instance[t] as usize];
+        let [a, b, c] = self.uv1[t];
+        let at = interpolate(a, b, c, uv);
+        // at ≥ 0: truncation is the floor.
+        let x = ((at.x * m.width as f32) as u32).min(m.width - 1);
+        let y = ((at.y * m.height as f32) as u32).min(m.height - 1);
+        let slot = layer * self.layer_texels + m.offset + (y * m.width + x) as usize;
+        DirectionGuide::from_record(self.guides.record(slot)?)
+    }
+
     /// The texels of one layer of one instance.
     fn texture_slice(&self, layer: usize, instance: usize) -> &[StoredRgb] {
         let m = &self.maps[instance];
@@ -351,6 +374,10 @@ impl SurfaceCache for Lightmaps {
         }
     }
 
+    fn borrows_guides(&self) -> bool {
+        self.settings.guiding
+    }
+
     /// Merges the round's estimates into their texels, marks buried ones (first round),
     /// filters, and asks for another round where the filtered error is above the bound;
     /// after the last round refills buried texels, dilates into the gutters and packs.
@@ -366,8 +393,10 @@ impl SurfaceCache for Lightmaps {
         let plan = self.refining_plan();
         let filtered = self.filtered(plan.as_ref());
         self.plan_next_round(plan, &moved, &filtered);
-        self.guides
-            .learn(self.pending.iter().map(|&(slot, _)| slot as usize));
+        if self.settings.guiding {
+            self.guides
+                .learn(self.pending.iter().map(|&(slot, _)| slot as usize));
+        }
         if self.pending.is_empty() {
             self.emitted = true;
             self.finish(

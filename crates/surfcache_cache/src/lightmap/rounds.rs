@@ -101,9 +101,11 @@ impl Lightmaps {
         // by the estimator itself: they update filtered values, which are not filtered
         // again.
         let budget = self.refining_plan().map(|plan| plan.first);
+        // Records are kept whether or not this cache draws through guides (`guiding`):
+        // a pass that gathers from it borrows them (`Lightmaps::guide_at`).
         if let Some(plan) = self
             .refining_plan()
-            .filter(|p| self.settings.guiding && p.bound > 0.0 && p.max > p.first)
+            .filter(|p| p.bound > 0.0 && p.max > p.first)
         {
             self.guides = TexelGuides::recording(&self.maps, &self.owner, self.layers, plan.floor);
         }

@@ -81,7 +81,7 @@ pub(super) fn sample_adaptively(
     min: u32,
     buried_share: Option<f32>,
     unseen: f64,
-    mut draw: impl FnMut([f32; 5], &mut Rng) -> (Vec3, FirstHit, u32),
+    mut draw: impl FnMut([f32; 5], &mut Rng) -> (Vec3, FirstHit, u32, f32),
 ) -> Estimate {
     let mut rng = Rng::new(seed, key);
     let floor = settings.floor as f64;
@@ -93,18 +93,18 @@ pub(super) fn sample_adaptively(
         let round_end = (tally.n + QMC_REPLICATES).min(max);
         while tally.n < round_end {
             let root = root_dimensions(tally.quasi, tally.n, &streams, &mut rng);
-            let (x, first_hit, path_rays) = draw(root, &mut rng);
-            tally.add(x, first_hit, path_rays);
+            let (x, first_hit, path_rays, weight) = draw(root, &mut rng);
+            tally.add(x, first_hit, path_rays, weight);
         }
-        let (n, back) = (tally.n, tally.back);
+        let (n, back, weight) = (tally.n, tally.back, tally.weight);
         let (mean, se) = tally.statistics();
         let total = (mean + offset.as_dvec3()).abs();
-        let zero_run = zero_run_error(n, tally.lit, back, unseen, total, floor);
+        let zero_run = zero_run_error(n, tally.lit, (back, weight), unseen, total, floor);
         let c = relative_error(total, se, floor).max(zero_run.1);
         // Every first ray so far met the back of a single-sided surface: the point lies
         // inside a solid, and the caches discard it whatever more samples would say.
         let buried = n >= BURIED_PROBE_SAMPLES
-            && (back == n || buried_share.is_some_and(|s| surely_buried(back, n, s)));
+            && (back == weight || buried_share.is_some_and(|s| surely_buried(back, weight, s)));
         if n >= max || (n >= min && c <= bound as f64) || buried {
             break (mean, se.max(DVec3::splat(zero_run.0)));
         }
@@ -114,10 +114,11 @@ pub(super) fn sample_adaptively(
 
 /// Whether `back` of `n` first rays meeting a back face show a share above `share` by
 /// [`BURIED_SIGMAS`] binomial standard deviations: `back − s·n > k·√(n·s·(1 − s))`.
+/// Counts are weighted as in [`Tally`] (whole numbers where no ray was guided).
 /// Never for `share` ≥ 1 (burial detection off).
-fn surely_buried(back: u32, n: u32, share: f32) -> bool {
-    let (s, n) = (share as f64, n as f64);
-    s < 1.0 && back as f64 - s * n > BURIED_SIGMAS * (n * s * (1.0 - s)).max(0.0).sqrt()
+fn surely_buried(back: f64, n: f64, share: f32) -> bool {
+    let s = share as f64;
+    s < 1.0 && back - s * n > BURIED_SIGMAS * (n * s * (1.0 - s)).max(0.0).sqrt()
 }
 
 /// One Owen scrambling per QMC replicate, keyed by (seed, key, replicate).
@@ -151,13 +152,21 @@ fn root_dimensions(
 /// The running sums of [`sample_adaptively`]: the samples drawn, their sums
 /// (pseudo-random: one accumulator; quasi-random: one per replicate), and how many were
 /// non-zero, met a back face first, and the rays they traced.
+///
+/// The back-face count is of cosine-weighted first rays, whatever drew them: each first
+/// ray counts with its weight `cos θ/π / p(ω)` (1/g through a guide, 1 otherwise), so
+/// that `back / weight` estimates the share of cosine-weighted rays that meet a back face
+/// (the burial verdict's measure) even when a guide draws more of them towards an
+/// opening or away from a wall.
 struct Tally {
     quasi: bool,
     n: u32,
     single: Accumulator,
     replicates: [Accumulator; QMC_REPLICATES as usize],
     lit: u32,
-    back: u32,
+    /// Σ weight over first rays that met a back face, and over all.
+    back: f64,
+    weight: f64,
     rays: u64,
 }
 
@@ -170,15 +179,21 @@ impl Tally {
             single: Accumulator::default(),
             replicates: [Accumulator::default(); QMC_REPLICATES as usize],
             lit: 0,
-            back: 0,
+            back: 0.0,
+            weight: 0.0,
             rays: 0,
         }
     }
 
-    /// Adds sample X_n, whose path met `first_hit` first and traced `path_rays` rays.
+    /// Adds sample X_n, whose path met `first_hit` first with a first ray of `weight`
+    /// (see the type) and traced `path_rays` rays.
     #[inline]
-    fn add(&mut self, x: Vec3, first_hit: FirstHit, path_rays: u32) {
-        self.back += (first_hit == FirstHit::Back) as u32;
+    fn add(&mut self, x: Vec3, first_hit: FirstHit, path_rays: u32, weight: f32) {
+        let weight = weight as f64;
+        if first_hit == FirstHit::Back {
+            self.back += weight;
+        }
+        self.weight += weight;
         self.lit += (x != Vec3::ZERO) as u32;
         self.rays += path_rays as u64;
         if self.quasi {
@@ -220,7 +235,7 @@ impl Tally {
         let zero_run = zero_run_error(
             n,
             self.lit,
-            self.back,
+            (self.back, self.weight),
             unseen,
             value.as_dvec3().abs(),
             floor,
@@ -232,7 +247,7 @@ impl Tally {
             samples: n,
             rel_error: relative_error(value.as_dvec3().abs(), std_error.as_dvec3(), floor)
                 .max(zero_run) as f32,
-            back_face_share: self.back as f32 / n as f32,
+            back_face_share: self.back as f32 / self.weight as f32,
             rays: self.rays,
         }
     }
@@ -246,16 +261,16 @@ pub fn zero_run_std_error(n: u32, unseen: f64) -> f64 {
 
 /// (standard error, relative error) of the light an all-zero run may have missed, against
 /// the brightest channel of `total` (0, 0 unless the run is all zero, `unseen` > 0 and at
-/// most half the first rays hit a back face).
+/// most half the first rays hit a back face: `back` of `weight`, weighted as in [`Tally`]).
 fn zero_run_error(
     n: u32,
     lit: u32,
-    back: u32,
+    (back, weight): (f64, f64),
     unseen: f64,
     total: DVec3,
     floor: f64,
 ) -> (f64, f64) {
-    if lit > 0 || 2 * back > n || unseen <= 0.0 {
+    if lit > 0 || 2.0 * back > weight || unseen <= 0.0 {
         return (0.0, 0.0);
     }
     let se = zero_run_std_error(n, unseen);

@@ -135,6 +135,7 @@ impl Change<'_> {
                     x_new - x_old,
                     path_new.first_hit,
                     path_new.rays + path_old.rays,
+                    path_new.first_weight,
                 )
             },
         )

@@ -299,11 +299,13 @@ pub fn hemisphere_sample(
         let x = next_event(&mut rays);
         let path = PathSample {
             rays,
+            first_weight: 1.0 / density,
             ..Default::default()
         };
         return (x, path);
     }
     let mut path = scene.incident_radiance(origin, w, Some(pdf), rng, options, at.gather);
+    path.first_weight = 1.0 / density;
     let x = next_event(&mut path.rays);
     let carried = path.radiance * weight;
     if let Some(r) = record {
@@ -357,7 +359,7 @@ pub fn estimate(at: &PointInScene, settings: &EstimatorSettings, seed: u64, key:
         },
         |root, rng| {
             let (x, path) = hemisphere_sample(at, settings, root, rng, None);
-            (x, path.first_hit, path.rays)
+            (x, path.first_hit, path.rays, path.first_weight)
         },
     );
     e.rays += punctual_rays as u64;
