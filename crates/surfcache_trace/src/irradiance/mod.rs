@@ -188,8 +188,9 @@ pub struct Estimate {
     pub samples: u32,
     /// C = se / (Ē + ε), the largest over the channels.
     pub rel_error: f32,
-    /// Share of samples whose first ray hit the back face of a single-sided surface: near
-    /// 1 for points buried inside closed geometry.
+    /// Share of samples whose first ray hit the back face of a single-sided surface, as
+    /// cosine-weighted first rays would (a guided ray counts with weight 1/g): near 1 for
+    /// points buried inside closed geometry.
     pub back_face_share: f32,
     /// Rays traced (closest-hit and shadow rays).
     pub rays: u64,
