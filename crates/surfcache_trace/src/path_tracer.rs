@@ -76,7 +76,7 @@ pub enum FirstHit {
 }
 
 /// Light arriving along one path, and what its first segment hit.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathSample {
     pub radiance: Vec3,
     pub first_hit: FirstHit,
@@ -85,6 +85,18 @@ pub struct PathSample {
     /// Weight of its first direction among cosine-weighted ones, `cos θ/π / p(ω)`: 1/g
     /// when a guide drew it, else 1 (what a back-face share is counted with).
     pub first_weight: f32,
+}
+
+/// No light, no rays, an escaping first ray of weight 1 (an unguided direction).
+impl Default for PathSample {
+    fn default() -> Self {
+        Self {
+            radiance: Vec3::ZERO,
+            first_hit: FirstHit::default(),
+            rays: 0,
+            first_weight: 1.0,
+        }
+    }
 }
 
 impl TracedScene {

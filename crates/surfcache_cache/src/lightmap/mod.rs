@@ -306,20 +306,35 @@ impl Lightmaps {
     /// ([`guides`]); `None` where it recorded nothing, or light spread over the whole
     /// hemisphere.
     pub fn guide_at(&self, triangle: u32, uv: Vec2, front: bool) -> Option<DirectionGuide> {
+        DirectionGuide::from_record(self.guides.record(self.slot_at(triangle, uv, front)?)?)
+    }
+
+    /// The layer (side), instance and texture coordinates (UV1, in [0, 1]²) of
+    /// barycentrics `uv` of `triangle`; `None` for a back side that was not baked.
+    fn locate(&self, triangle: u32, uv: Vec2, front: bool) -> Option<(usize, usize, Vec2)> {
         let layer = match (front, self.layers) {
             (true, _) => 0,
             (false, 2) => 1,
             _ => return None,
         };
         let t = triangle as usize;
-        let m = &self.maps[self.triangle_instance[t] as usize];
         let [a, b, c] = self.uv1[t];
-        let at = interpolate(a, b, c, uv);
-        // at ≥ 0: truncation is the floor.
-        let x = ((at.x * m.width as f32) as u32).min(m.width - 1);
-        let y = ((at.y * m.height as f32) as u32).min(m.height - 1);
-        let slot = layer * self.layer_texels + m.offset + (y * m.width + x) as usize;
-        DirectionGuide::from_record(self.guides.record(slot)?)
+        Some((
+            layer,
+            self.triangle_instance[t] as usize,
+            interpolate(a, b, c, uv),
+        ))
+    }
+
+    /// The texel slot (layer · layer_texels + texel) that holds barycentrics `uv` of
+    /// `triangle` on the given side.
+    fn slot_at(&self, triangle: u32, uv: Vec2, front: bool) -> Option<usize> {
+        let (layer, instance, at) = self.locate(triangle, uv, front)?;
+        let m = &self.maps[instance];
+        let p = at * Vec2::new(m.width as f32, m.height as f32);
+        let x = (p.x.max(0.0) as usize).min(m.width as usize - 1);
+        let y = (p.y.max(0.0) as usize).min(m.height as usize - 1);
+        Some(layer * self.layer_texels + m.offset + y * m.width as usize + x)
     }
 
     /// The texels of one layer of one instance.
@@ -415,16 +430,10 @@ impl SurfaceCache for Lightmaps {
     /// Bilinear sample of the side's texture at the triangle's interpolated UV1. A back
     /// side that was not baked (`both_sides` off) is NaN.
     fn lookup(&self, triangle: u32, uv: Vec2, front: bool) -> Vec3 {
-        let layer = match (front, self.layers) {
-            (true, _) => 0,
-            (false, 2) => 1,
-            _ => return Vec3::NAN,
+        let Some((layer, instance, at)) = self.locate(triangle, uv, front) else {
+            return Vec3::NAN;
         };
-        let t = triangle as usize;
-        let instance = self.triangle_instance[t] as usize;
         let m = &self.maps[instance];
-        let [a, b, c] = self.uv1[t];
-        let at = interpolate(a, b, c, uv);
         let base = layer * self.layer_texels + m.offset;
         bilinear_packed(
             self.texture_slice(layer, instance),
@@ -461,19 +470,9 @@ impl SurfaceCache for Lightmaps {
     }
 
     fn diagnostic(&self, triangle: u32, uv: Vec2, front: bool) -> Diagnostic {
-        let layer = match (front, self.layers) {
-            (true, _) => 0,
-            (false, 2) => 1,
-            _ => return Diagnostic::default(),
+        let Some(slot) = self.slot_at(triangle, uv, front) else {
+            return Diagnostic::default();
         };
-        let t = triangle as usize;
-        let instance = self.triangle_instance[t] as usize;
-        let m = &self.maps[instance];
-        let [a, b, c] = self.uv1[t];
-        let p = interpolate(a, b, c, uv) * Vec2::new(m.width as f32, m.height as f32);
-        let x = (p.x.max(0.0) as usize).min(m.width as usize - 1);
-        let y = (p.y.max(0.0) as usize).min(m.height as usize - 1);
-        let slot = layer * self.layer_texels + m.offset + y * m.width as usize + x;
         Diagnostic {
             samples: self.sample_counts.get(slot).copied().unwrap_or(0),
             order: None,
