@@ -143,6 +143,11 @@ pub struct SamplePoint {
     /// where more are needed, e.g. after filtering); `None`: the estimator's own stopping
     /// rule.
     pub budget: Option<u32>,
+    /// Share of the estimator's `max_samples` this point may draw when `budget` is `None`
+    /// (1: all of them; never below `min_samples`). Irradiance-map samples that stand for
+    /// less surface than the density's spacing draw fewer (`irradiance_map` module docs,
+    /// Samples by area).
+    pub cap_share: f32,
 }
 
 /// Figures every cache reports (`report.json`).

@@ -183,6 +183,7 @@ impl SurfaceCache for VertexLighting {
                                 .flatten()
                                 .map(Prior::Estimated),
                             budget: None,
+                            cap_share: 1.0,
                         });
                     }
                 }

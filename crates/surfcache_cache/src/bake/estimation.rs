@@ -193,6 +193,8 @@ impl Previous {
 /// Estimates E at one sample point of a cache (with final gathering from `gather` when
 /// given: see [`IrradianceLookup`]), guided as the cache says, stopping early where the
 /// cache will discard it as buried above `buried_share` ([`crate::SurfaceCache::buried_share`]).
+/// A point with a budget draws exactly that many samples; one without draws until the
+/// estimator's stopping rule, at most its [`SamplePoint::cap_share`] of `max_samples`.
 pub fn estimate_point(
     scene: &TracedScene,
     point: &SamplePoint,
@@ -216,6 +218,17 @@ pub fn estimate_point(
                 ..*settings
             };
             estimate(&at, &fixed, seed, point.key)
+        }
+        None if point.cap_share < 1.0 => {
+            let share = (settings.max_samples as f32 * point.cap_share) as u32;
+            let capped = EstimatorSettings {
+                max_samples: share.clamp(
+                    settings.min_samples.min(settings.max_samples),
+                    settings.max_samples,
+                ),
+                ..*settings
+            };
+            estimate(&at, &capped, seed, point.key)
         }
         None => estimate(&at, settings, seed, point.key),
     }

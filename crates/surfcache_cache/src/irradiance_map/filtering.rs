@@ -33,8 +33,9 @@ impl IrradianceMaps {
     /// samples (interpolated samples follow in [`Self::rederive`]). Samples with a crossing line keep their own estimates and lend
     /// them to nobody; the other samples of crossed grids share only with neighbours
     /// that nothing separates from them (an any-hit ray between the two ray origins).
-    /// Estimates without samples are taps, not filtered. An incremental re-bake filters
-    /// nothing (module docs, Filtering). Returns whether it filtered.
+    /// Estimates without samples, and estimates whose samples were all zero (lent as exact
+    /// zeros), are taps, not filtered. An incremental re-bake filters nothing (module
+    /// docs, Filtering). Returns whether it filtered.
     pub(super) fn share_samples(&self, scene: &TracedScene, w: &mut Working) -> bool {
         if self.settings.filter.iterations == 0 || w.rebake {
             return false;
@@ -71,8 +72,16 @@ impl IrradianceMaps {
                             guarded: w.crossed[g],
                         });
                         value.push(w.raw[k]);
-                        variance.push(w.std_error[k] * w.std_error[k]);
-                        filtered.push(w.samples[k] > 0);
+                        // An estimate whose every sample was zero carries the standard
+                        // error of the light it may have missed (`ZERO_RUN_EVENTS`),
+                        // not noise: it is kept as it is and lends the filter an exact
+                        // zero, so that it takes no light from taps beyond a wall (the
+                        // inside of a sealed box under its lit top) and darkens its
+                        // neighbours no more than a measured zero would.
+                        let zero_run = w.raw[k] == Vec3::ZERO;
+                        let se = if zero_run { Vec3::ZERO } else { w.std_error[k] };
+                        variance.push(se * se);
+                        filtered.push(w.samples[k] > 0 && !zero_run);
                     }
                     members.push((k as u32, node_of[id as usize]));
                 }

@@ -19,7 +19,7 @@ use crate::{
 };
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
-use surfcache_core::{index::NO_INDEX, sampling::splitmix64};
+use surfcache_core::{geometry::longest_edge, index::NO_INDEX, sampling::splitmix64};
 use surfcache_trace::{Estimate, TracedScene};
 
 /// Probes the new samples of this round's crossed grids ([`crossings::probe`]), in the
@@ -136,6 +136,12 @@ impl IrradianceMaps {
                 && !w.whole.get(g as usize).copied().unwrap_or(false);
             let coarse_base = self.offsets[g as usize] as usize;
             let near = near_reach(scene, t, coarse);
+            // Samples by area (module docs): the share of the sample cap this order's
+            // samples may draw.
+            let cap_share = {
+                let [a, b, c] = scene.positions()[t as usize];
+                self.settings.cap_share(longest_edge(a, b, c) / n as f32)
+            };
             for_each_new_sample(coarse, n, |i, j, m| {
                 let mut uv = Vec2::new(i as f32 * inv, j as f32 * inv);
                 let mut line = NO_INDEX;
@@ -180,6 +186,7 @@ impl IrradianceMaps {
                             key: splitmix64(sample_key ^ crossings::FOOT_KEY),
                             prior,
                             budget: None,
+                            cap_share: 1.0,
                         });
                     }
                 }
@@ -217,6 +224,7 @@ impl IrradianceMaps {
                     key: sample_key,
                     prior: prior_base.map(|b| w.priors[b + m]),
                     budget: None,
+                    cap_share,
                 });
             });
         }

@@ -7,6 +7,14 @@ use serde::{Deserialize, Serialize};
 use surfcache_core::geometry::longest_edge;
 use surfcache_trace::{Estimate, TracedScene};
 
+/// Grid spacing, in units of the density's spacing 1/density, from which a sample draws
+/// the estimator's full sample cap; closer samples draw a share in proportion to their
+/// spacing ([`IrradianceMapSettings::cap_share`]): the cap is what a sample one density
+/// spacing from its neighbours may draw. Grids at their maximum order sit between one
+/// half and one spacing apart (their samples draw one half to all of the cap), the
+/// corners of small triangles closer.
+pub const FULL_CAP_SPACING: f32 = 1.0;
+
 /// How irradiance maps refine and what they store.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IrradianceMapSettings {
@@ -124,6 +132,19 @@ impl IrradianceMapSettings {
         };
         target.clamp(1, self.order_cap())
     }
+
+    /// The share of the estimator's sample cap a sample of a grid with spacing `spacing`
+    /// (metres) may draw: `min(1, spacing · density / FULL_CAP_SPACING)`. A sample closer
+    /// to its neighbours than [`FULL_CAP_SPACING`] of the density's spacing stands for less
+    /// surface, so it draws fewer samples (module docs, Samples by area).
+    pub fn cap_share(&self, spacing: f32) -> f32 {
+        let share = spacing * self.density / FULL_CAP_SPACING;
+        if share.is_finite() {
+            share.min(1.0)
+        } else {
+            1.0
+        }
+    }
 }
 
 impl IrradianceMapSettings {
@@ -169,5 +190,32 @@ impl EstimateTotals {
             },
             ..Default::default()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn samples_draw_the_cap_in_proportion_to_their_spacing() {
+        let s = IrradianceMapSettings {
+            density: 8.0,
+            ..Default::default()
+        };
+        // One density spacing and more: the whole cap.
+        assert_eq!(s.cap_share(0.125), 1.0);
+        assert_eq!(s.cap_share(3.0), 1.0);
+        // Grids at their maximum order: one half to all of it.
+        for edge in [0.07f32, 0.3, 1.0, 4.9] {
+            let n = s.max_order_for(edge);
+            let share = s.cap_share(edge / n as f32);
+            assert!(
+                (0.5..=1.0).contains(&share),
+                "edge {edge}: order {n}, share {share}"
+            );
+        }
+        // The corners of a 2-cm triangle: its spacing over the density's.
+        assert!((s.cap_share(0.02) - 0.16).abs() < 1e-6);
     }
 }

@@ -90,6 +90,7 @@ impl Lightmaps {
                 .copied()
                 .flatten(),
             budget,
+            cap_share: 1.0,
         }
     }
 
@@ -164,6 +165,7 @@ impl Lightmaps {
                 key: splitmix64(texel.key ^ crossings::FOOT_KEY),
                 prior,
                 budget: foot_budget,
+                cap_share: 1.0,
             });
             self.foot_lines
                 .push((c, matches!(prior, Some(Prior::Filled(_)))));
