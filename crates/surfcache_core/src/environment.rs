@@ -223,6 +223,9 @@ pub struct EnvironmentSampler {
     columns: Vec<Distribution1D>,
     /// Solid angle of one pixel of each row.
     pixel_solid_angle: Vec<f32>,
+    /// cos θ at the top edge of each row and at the bottom of the last (H + 1 entries),
+    /// so that a sample computes no cosine of its own.
+    row_edge_cos: Vec<f32>,
     /// (1/4π) Σ Y(texel) ΔΩ: the map's mean luminance (the weights are dilated).
     mean_luminance: f32,
 }
@@ -260,6 +263,7 @@ impl EnvironmentSampler {
             rows: Distribution1D::new(&row_weights),
             columns,
             pixel_solid_angle,
+            row_edge_cos: (0..=h).map(|j| (j as f32 / h as f32 * PI).cos()).collect(),
             mean_luminance: (total / (4.0 * std::f64::consts::PI)) as f32,
         }
     }
@@ -275,9 +279,8 @@ impl EnvironmentSampler {
         let (j, p_row, v) = self.rows.sample(u.y);
         let (i, p_col, s) = self.columns[j].sample(u.x);
         // Uniform in (φ, cos θ) over the pixel is uniform in solid angle.
-        let t0 = j as f32 / self.height as f32 * PI;
-        let t1 = (j + 1) as f32 / self.height as f32 * PI;
-        let cos_theta = t0.cos() + (t1.cos() - t0.cos()) * v;
+        let (c0, c1) = (self.row_edge_cos[j], self.row_edge_cos[j + 1]);
+        let cos_theta = c0 + (c1 - c0) * v;
         let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
         let phi = ((i as f32 + s) / self.width as f32 - 0.5) * TAU;
         let d = Vec3::new(sin_theta * phi.sin(), cos_theta, -sin_theta * phi.cos());

@@ -289,13 +289,13 @@ impl TracedScene {
             } else {
                 FirstHit::Back
             });
-            let p = self.hit_point(&hit, d);
             let uv0 = self.uv0_at(t, hit.uv);
             let emitted = material.emission_at(uv0, front);
             if emitted != Vec3::ZERO {
                 let mut weight = 1.0;
                 if let Some(p_bsdf) = pdf {
-                    let p_light = self.light_sampler().pdf_emitter(self, t, o, p.position, d);
+                    let x = self.surface_point(t, hit.uv, front).position;
+                    let p_light = self.light_sampler().pdf_emitter(self, t, o, x, d);
                     weight = power_heuristic(p_bsdf, p_light);
                 }
                 radiance += throughput * emitted * weight;
@@ -303,6 +303,8 @@ impl TracedScene {
             if options.max_bounces.is_some_and(|b| bounce >= b) {
                 break;
             }
+            // A gathered hit ends the path without its position or normals: their
+            // triangle data is read only by paths that go on.
             if let Some(cache) = gather
                 && let Some(e) = cache.irradiance(t, hit.uv, front)
             {
@@ -311,6 +313,7 @@ impl TracedScene {
                 radiance += throughput * albedo * core::f32::consts::FRAC_1_PI * e;
                 break;
             }
+            let p = self.surface_point(t, hit.uv, front);
             let albedo = material.albedo_at(uv0);
             if albedo == Vec3::ZERO {
                 break;
