@@ -111,11 +111,15 @@ impl EnvironmentMap {
         ([i0, i1], [j0, j1], x - x0, y - y0)
     }
 
+    /// cos θ_j of the upper edge of pixel row `j` (θ_j = jπ/H; `j = H` is the lower edge
+    /// of the last row).
+    pub fn row_edge_cos(&self, j: u32) -> f32 {
+        (j as f32 / self.height as f32 * PI).cos()
+    }
+
     /// Solid angle of pixel row `j`: (2π/W)·(cos θ₀ − cos θ₁).
     pub fn row_solid_angle(&self, j: u32) -> f32 {
-        let t0 = j as f32 / self.height as f32 * PI;
-        let t1 = (j + 1) as f32 / self.height as f32 * PI;
-        TAU / self.width as f32 * (t0.cos() - t1.cos())
+        TAU / self.width as f32 * (self.row_edge_cos(j) - self.row_edge_cos(j + 1))
     }
 }
 
@@ -223,8 +227,8 @@ pub struct EnvironmentSampler {
     columns: Vec<Distribution1D>,
     /// Solid angle of one pixel of each row.
     pixel_solid_angle: Vec<f32>,
-    /// cos θ at the top edge of each row and at the bottom of the last (H + 1 entries),
-    /// so that a sample computes no cosine of its own.
+    /// [`EnvironmentMap::row_edge_cos`] of every row edge (H + 1 entries), so that a
+    /// sample computes no cosine of its own.
     row_edge_cos: Vec<f32>,
     /// (1/4π) Σ Y(texel) ΔΩ: the map's mean luminance (the weights are dilated).
     mean_luminance: f32,
@@ -263,7 +267,7 @@ impl EnvironmentSampler {
             rows: Distribution1D::new(&row_weights),
             columns,
             pixel_solid_angle,
-            row_edge_cos: (0..=h).map(|j| (j as f32 / h as f32 * PI).cos()).collect(),
+            row_edge_cos: (0..=h).map(|j| map.row_edge_cos(j)).collect(),
             mean_luminance: (total / (4.0 * std::f64::consts::PI)) as f32,
         }
     }
