@@ -58,7 +58,10 @@
 //! corners of small triangles. For the error over a surface, samples count the most
 //! where they stand for the most area: n_i samples of variance σ_i² standing for area
 //! a_i give the area-weighted error Σ a_i σ_i² / n_i, least for n_i ∝ σ_i √a_i, and
-//! √a_i ∝ h_i. Crossing feet keep the full cap. On Sponza this spends a fifth fewer
+//! √a_i ∝ h_i. The spacing h is the grid's longest edge over its order, except on a
+//! sliver, whose order follows its longest edge while its samples share a small area:
+//! there h is the side of the area a sample stands for
+//! ([`IrradianceMapSettings::cap_spacing`]). Crossing feet keep the full cap. On Sponza this spends a fifth fewer
 //! samples for nearly the same error, where lowering the cap for all samples by as much
 //! loses the median (docs/results.md, "Light-sample roulette and samples by area").
 //!

@@ -2,7 +2,7 @@
 //! shared), and how a round's estimates move into the grids' new layout.
 
 use super::{
-    IrradianceMaps, Working,
+    IrradianceMapSettings, IrradianceMaps, Working,
     grid::{
         coarse_neighbours, corner_of, for_each_new_sample, grid_index, grid_size, order_of_level,
         sample_key,
@@ -19,7 +19,7 @@ use crate::{
 };
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
-use surfcache_core::{geometry::longest_edge, index::NO_INDEX, sampling::splitmix64};
+use surfcache_core::{index::NO_INDEX, sampling::splitmix64};
 use surfcache_trace::{Estimate, TracedScene};
 
 /// Probes the new samples of this round's crossed grids ([`crossings::probe`]), in the
@@ -140,7 +140,8 @@ impl IrradianceMaps {
             // samples may draw.
             let cap_share = {
                 let [a, b, c] = scene.positions()[t as usize];
-                self.settings.cap_share(longest_edge(a, b, c) / n as f32)
+                self.settings
+                    .cap_share(IrradianceMapSettings::cap_spacing(a, b, c, n))
             };
             for_each_new_sample(coarse, n, |i, j, m| {
                 let mut uv = Vec2::new(i as f32 * inv, j as f32 * inv);
