@@ -5,7 +5,7 @@ use super::MAX_ORDER_LIMIT;
 use crate::{CacheStats, filter::FilterSettings};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
-use surfcache_core::geometry::longest_edge;
+use surfcache_core::geometry::{longest_edge, triangle_area};
 use surfcache_trace::{Estimate, TracedScene};
 
 /// Grid spacing, in units of the density's spacing 1/density, from which a sample draws
@@ -150,8 +150,8 @@ impl IrradianceMapSettings {
     /// (module docs): on Sponza before this, the grids whose longest edge is 3× their
     /// area's side or more held 11 % of the area and 46 % of the samples.
     pub fn cap_spacing(a: Vec3, b: Vec3, c: Vec3, n: u32) -> f32 {
-        let area = 0.5 * (b - a).cross(c - a).length();
-        longest_edge(a, b, c).min(SLIVER_RATIO * (2.0 * area).sqrt()) / n.max(1) as f32
+        let side = (2.0 * triangle_area(a, b, c)).sqrt();
+        longest_edge(a, b, c).min(SLIVER_RATIO * side) / n.max(1) as f32
     }
 
     /// The share of the estimator's sample cap a sample of a grid with spacing `spacing`
